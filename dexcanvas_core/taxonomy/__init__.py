@@ -1,0 +1,56 @@
+"""DexCanvas taxonomy: the 21 manipulation types, the 30 objects, and object/type pairs.
+
+>>> from dexcanvas_core.taxonomy import Pair, manipulation_type, object_spec
+>>> str(Pair.parse("cube2/tripod"))
+'cube2/tripod'
+>>> manipulation_type("001-Palmar-Pinch").name
+'palmar_pinch'
+>>> object_spec("Cube 2").size_m
+(0.052,)
+
+Sources and estimates are documented in :mod:`.manipulation` and :mod:`.objects`.
+"""
+
+from dexcanvas_core.taxonomy.manipulation import (
+    GROUPS,
+    MANIPULATION_TYPES,
+    THUMB_POSITIONS,
+    Group,
+    ManipulationType,
+    Thumb,
+    manipulation_type,
+    types_in_group,
+)
+from dexcanvas_core.taxonomy.objects import (
+    HEAVY_BASES,
+    OBJECTS,
+    SHAPES,
+    SIZE_LAYOUT,
+    ObjectSpec,
+    Shape,
+    Source,
+    heavy_variant,
+    object_spec,
+)
+from dexcanvas_core.taxonomy.pair import Pair
+
+__all__ = [
+    "GROUPS",
+    "HEAVY_BASES",
+    "MANIPULATION_TYPES",
+    "OBJECTS",
+    "SHAPES",
+    "SIZE_LAYOUT",
+    "THUMB_POSITIONS",
+    "Group",
+    "ManipulationType",
+    "ObjectSpec",
+    "Pair",
+    "Shape",
+    "Source",
+    "Thumb",
+    "heavy_variant",
+    "manipulation_type",
+    "object_spec",
+    "types_in_group",
+]
