@@ -1,0 +1,192 @@
+"""``dexcanvas``: the command line of the human side (datasets, examples, exports).
+
+A thin layer: each sub-command parses into a frozen config and calls a library function.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from dexcanvas_core import __version__
+from dexcanvas_core.errors import DexCanvasError
+
+
+def _human_bytes(n: int) -> str:
+    size = float(n)
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
+        if size < 1024 or unit == "TiB":
+            return f"{size:.1f} {unit}" if unit != "B" else f"{int(size)} B"
+        size /= 1024
+    return f"{n} B"
+
+
+@dataclass(frozen=True)
+class InfoConfig:
+    path: Path
+    as_json: bool = False
+
+
+def run_info(cfg: InfoConfig) -> dict:
+    """Summarise a dataset; print a table (or JSON) and return the summary."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from dexcanvas_core.io import open_dataset
+
+    info = open_dataset(cfg.path).info()
+    d = info.to_dict()
+    if cfg.as_json:
+        print(json.dumps(d, indent=2, sort_keys=True))
+        return d
+    con = Console()
+    t = Table(title=f"DexCanvas dataset {info.path}", show_header=False)
+    t.add_row("rows (trajectories)", str(info.rows))
+    t.add_row("frames", f"{info.frames:,}")
+    t.add_row("duration", f"{info.duration_s:.1f} s ({info.duration_s / 3600:.3f} h)")
+    t.add_row("fps", ", ".join(f"{k} Hz × {v}" for k, v in sorted(info.fps.items())))
+    t.add_row("objects", str(len(info.objects)))
+    t.add_row("manipulation types", str(len(info.gestures)))
+    t.add_row("operators", ", ".join(f"{k} ({v})" for k, v in sorted(info.operators.items())))
+    t.add_row("contacts", "yes" if info.has_contacts else "no")
+    t.add_row("size on disk", _human_bytes(info.size_bytes))
+    t.add_row("schema version", info.schema_version or "public (unversioned)")
+    con.print(t)
+    pairs = Table(title="pairs (object/manipulation_type)")
+    pairs.add_column("pair")
+    pairs.add_column("rows", justify="right")
+    for k, v in sorted(info.pairs.items()):
+        pairs.add_row(k, str(v))
+    con.print(pairs)
+    return d
+
+
+@dataclass(frozen=True)
+class ValidateConfig:
+    path: Path
+
+
+def run_validate(cfg: ValidateConfig) -> int:
+    """Read every row with full validation; print the first problem of each bad row.
+
+    Returns the number of bad rows.
+    """
+    from rich.console import Console
+    from rich.progress import track
+
+    from dexcanvas_core.io import open_dataset
+    from dexcanvas_core.io.reader import row_to_trajectory
+
+    con = Console()
+    ds = open_dataset(cfg.path)
+    n = len(ds)
+    bad = 0
+    position = 0
+    batches = ds.iter_batches(batch_size=8)
+    for batch in track(batches, description="validating", total=(n + 7) // 8, console=con):
+        for i in range(batch.num_rows):
+            try:
+                row_to_trajectory(batch, i, dataset=ds.path, row=position, validate=True)
+            except DexCanvasError as e:
+                bad += 1
+                con.print(f"[red]✗[/red] {e}")
+            position += 1
+    con.print(f"{n - bad} of {n} rows valid")
+    return bad
+
+
+@dataclass(frozen=True)
+class ExportConfig:
+    path: Path
+    out: Path
+    objects: tuple[str, ...] = ()
+    manipulation_types: tuple[str, ...] = ()
+    operators: tuple[str, ...] = ()
+
+
+def run_export(cfg: ExportConfig) -> Path:
+    """Export a dataset (optionally filtered) to a Parquet file."""
+    from dexcanvas_core.io import export_parquet
+    from dexcanvas_core.loaders.filters import resolve_filter
+
+    flt = resolve_filter(cfg.manipulation_types or None, cfg.objects or None, cfg.operators or None)
+    out = export_parquet(cfg.path, cfg.out, filter=flt)
+    print(f"wrote {out}")
+    return out
+
+
+@dataclass(frozen=True)
+class ExampleConfig:
+    out: Path
+    seed: int = 0
+    overwrite: bool = False
+
+
+def run_example(cfg: ExampleConfig) -> Path:
+    """Write the built-in example dataset (synthetic, public layout) to ``cfg.out``."""
+    from dexcanvas_core.example import build_example_dataset
+
+    out = build_example_dataset(cfg.out, seed=cfg.seed, overwrite=cfg.overwrite, progress=True)
+    print(f"wrote {out}")
+    return out
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="dexcanvas",
+        description="DexCanvas human demonstrations: inspect, validate, export, build examples.",
+    )
+    p.add_argument("--version", action="version", version=f"dexcanvas-retarget {__version__}")
+    p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    s = sub.add_parser("info", help="summarise a Lance dataset (rows, pairs, operators, frames, fps, size)")
+    s.add_argument("path", type=Path, help="dataset directory (*.lance)")
+    s.add_argument("--json", action="store_true", help="print JSON instead of tables")
+
+    s = sub.add_parser("validate", help="check every row of a dataset (shapes, NaNs, rotations, fps)")
+    s.add_argument("path", type=Path)
+
+    s = sub.add_parser("export", help="export a dataset (optionally filtered) to Parquet")
+    s.add_argument("path", type=Path)
+    s.add_argument("--parquet", type=Path, required=True, dest="out", help="output .parquet file")
+    s.add_argument("--objects", nargs="*", default=[], help="object ids, e.g. cube2 sphere1")
+    s.add_argument("--types", nargs="*", default=[], help="manipulation types (names or codes)")
+    s.add_argument("--operators", nargs="*", default=[])
+
+    s = sub.add_parser("example", help="write the built-in synthetic example dataset")
+    s.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--overwrite", action="store_true", help="replace an existing dataset")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(message)s"
+    )
+    try:
+        if args.command == "info":
+            run_info(InfoConfig(args.path, args.json))
+        elif args.command == "validate":
+            return 1 if run_validate(ValidateConfig(args.path)) else 0
+        elif args.command == "export":
+            run_export(
+                ExportConfig(args.path, args.out, tuple(args.objects), tuple(args.types),
+                             tuple(args.operators))
+            )  # fmt: skip
+        elif args.command == "example":
+            run_example(ExampleConfig(args.out, args.seed, args.overwrite))
+    except DexCanvasError as e:
+        print(f"dexcanvas {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
