@@ -144,11 +144,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    s = sub.add_parser("info", help="summarise a Lance dataset (rows, pairs, operators, frames, fps, size)")
+    s = sub.add_parser(
+        "info", help="summarise a Lance dataset (rows, pairs, operators, frames, fps, size)"
+    )
     s.add_argument("path", type=Path, help="dataset directory (*.lance)")
     s.add_argument("--json", action="store_true", help="print JSON instead of tables")
 
-    s = sub.add_parser("validate", help="check every row of a dataset (shapes, NaNs, rotations, fps)")
+    s = sub.add_parser(
+        "validate", help="check every row of a dataset (shapes, NaNs, rotations, fps)"
+    )
     s.add_argument("path", type=Path)
 
     s = sub.add_parser("export", help="export a dataset (optionally filtered) to Parquet")

@@ -70,4 +70,6 @@ class MissingDependencyError(DexCanvasError, ImportError):
 
     def __init__(self, package: str, feature: str, extra: str | None = None):
         fix = f"pip install 'dexcanvas-retarget[{extra}]'" if extra else f"pip install {package}"
-        super().__init__(f"{feature} needs the package {package!r}, which is not installed; run: {fix}")
+        super().__init__(
+            f"{feature} needs the package {package!r}, which is not installed; run: {fix}"
+        )

@@ -83,7 +83,9 @@ def _grasp_pose(mtype, half_width: float, rng: np.random.Generator) -> np.ndarra
         for j in range(3):
             if finger == "thumb":
                 # Thumb: oppose (rotate about template x toward the palm) and flex its chain.
-                pose[3 * k + j] = [0.9 * (j == 0), -0.25, 0.35 + 0.25 * j] if active else [0.2, 0, 0.2]
+                pose[3 * k + j] = (
+                    [0.9 * (j == 0), -0.25, 0.35 + 0.25 * j] if active else [0.2, 0, 0.2]
+                )
                 pose[3 * k + j] *= 1.0 + 0.05 * rng.normal()
             else:
                 angle = (flex * (1.0 if j == 0 else 0.8)) if active else 0.3 + 0.5 * j
@@ -98,7 +100,7 @@ def example_trajectories(seed: int = 0, reps: int = 1) -> Iterator[Trajectory]:
     from dexcanvas_core.mano import HandSkeleton, ManoLayer
     from dexcanvas_core.taxonomy import Pair
 
-    T = int(round(PHASES[-1] * FPS)) + 1
+    T = round(PHASES[-1] * FPS) + 1
     t = np.arange(T) / FPS
     for p_idx, pair_name in enumerate(EXAMPLE_PAIRS):
         pair = Pair.parse(pair_name)
@@ -181,7 +183,11 @@ def example_trajectories(seed: int = 0, reps: int = 1) -> Iterator[Trajectory]:
 
 
 def build_example_dataset(
-    out: str | os.PathLike, *, seed: int = 0, reps: int = 1, overwrite: bool = False,
+    out: str | os.PathLike,
+    *,
+    seed: int = 0,
+    reps: int = 1,
+    overwrite: bool = False,
     progress: bool = False,
 ) -> Path:
     """Write the example dataset (Lance, public layout) to ``out``; returns the path."""
@@ -194,4 +200,3 @@ def build_example_dataset(
 
         trajs = track(trajs, total=n, description="building example demonstrations")
     return write_dataset(trajs, out, mode="overwrite" if overwrite else "create")
-

@@ -42,11 +42,7 @@ MANO21: tuple[str, ...] = (*MANO_JOINTS, *(f"{f}_tip" for f in FINGERS))
 
 OPENPOSE21: tuple[str, ...] = (
     "wrist",
-    *(
-        name
-        for f in FINGERS
-        for name in (f"{f}1", f"{f}2", f"{f}3", f"{f}_tip")
-    ),
+    *(name for f in FINGERS for name in (f"{f}1", f"{f}2", f"{f}3", f"{f}_tip")),
 )
 """Wrist, then thumb, index, middle, ring, pinky; base to tip (4 keypoints per finger)."""
 
@@ -67,7 +63,7 @@ def permutation(src: str, dst: str) -> np.ndarray:
 
 
 def convert_keypoints(x, src: KeypointOrder, dst: KeypointOrder):
-    """Reorder the keypoint axis (``-2``) of ``x`` (numpy array or torch tensor, ``(..., 21, D)``)."""
+    """Reorder the keypoint axis of ``x``, a numpy array or torch tensor ``(..., 21, D)``."""
     if x.shape[-2:-1] != (21,) and (len(x.shape) < 2 or x.shape[-2] != 21):
         raise ValidationError(
             f"keypoints must have shape (..., 21, D), got {tuple(x.shape)}", field="keypoints"

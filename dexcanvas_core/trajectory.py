@@ -77,7 +77,9 @@ def _f32(x, shape: tuple[int | None, ...], name: str) -> np.ndarray:
         a = np.asarray(x, dtype=np.float32)
     except (TypeError, ValueError) as e:
         raise ValidationError(f"{name}: cannot convert to a float array ({e})", field=name) from e
-    ok = a.ndim == len(shape) and all(s is None or s == d for s, d in zip(shape, a.shape))
+    ok = a.ndim == len(shape) and all(
+        s is None or s == d for s, d in zip(shape, a.shape, strict=False)
+    )
     if not ok:
         want = "(" + ", ".join("T" if s is None else str(s) for s in shape) + ")"
         raise ValidationError(f"{name} must have shape {want}, got {a.shape}", field=name)
@@ -108,7 +110,9 @@ class HandTrack:
     def __post_init__(self) -> None:
         self.global_pos = _f32(self.global_pos, (None, 3), f"hands[{self.name}].mano_global_pos")
         T = self.global_pos.shape[0]
-        self.global_rot_aa = _f32(self.global_rot_aa, (T, 3), f"hands[{self.name}].mano_global_rot_aa")
+        self.global_rot_aa = _f32(
+            self.global_rot_aa, (T, 3), f"hands[{self.name}].mano_global_rot_aa"
+        )
         self.hand_pose = _f32(self.hand_pose, (T, 48), f"hands[{self.name}].mano_hand_pose")
         if self.joint_pos is not None:
             self.joint_pos = _f32(self.joint_pos, (T, 21, 3), f"hands[{self.name}].mano_joint_pos")
@@ -208,9 +212,12 @@ class Contacts:
         if np.any(np.diff(self.pair_offsets) < 0):
             raise ValidationError("contact pair_offsets must be non-decreasing")
         P = int(self.pair_offsets[-1])
-        self.totals = {k: _f32(self.totals[k], (K, 3), f"contact.{k}") for k in CONTACT_TOTAL_FIELDS}
+        self.totals = {
+            k: _f32(self.totals[k], (K, 3), f"contact.{k}") for k in CONTACT_TOTAL_FIELDS
+        }
         self.pairs = {
-            k: _f32(self.pairs[k], (P, 3), f"contact.contact_pairs.{k}") for k in CONTACT_PAIR_FIELDS
+            k: _f32(self.pairs[k], (P, 3), f"contact.contact_pairs.{k}")
+            for k in CONTACT_PAIR_FIELDS
         }
         if self.force_world is not None:
             self.force_world = _f32(self.force_world, (P, 3), "contact.contact_pairs.force_world")
@@ -386,7 +393,7 @@ class Trajectory:
 
     # -- checks ------------------------------------------------------------------------------
     def validate(self, *, fps_tolerance: float = 0.05) -> Trajectory:
-        """Check shapes, finiteness, rotation sanity, timestamps and fps; raise on the first problem.
+        """Check shapes, finiteness, rotations, timestamps and fps; raise on the first problem.
 
         Rotations: axis-angle norms must be below 2π (larger norms usually mean degrees were
         stored); per-joint finger rotations below π. Timestamps must be strictly increasing, and
@@ -399,7 +406,9 @@ class Trajectory:
         if T == 0:
             raise ValidationError(f"{where}: no frames", field="timestamp")
         if not (math.isfinite(self.fps) and self.fps > 0):
-            raise ValidationError(f"{where}: fps must be positive, got {self.fps}", field="data_fps")
+            raise ValidationError(
+                f"{where}: fps must be positive, got {self.fps}", field="data_fps"
+            )
         if not np.all(np.isfinite(self.timestamp)):
             raise ValidationError(f"{where}: timestamp contains NaN or inf", field="timestamp")
         if T > 1:
@@ -475,7 +484,8 @@ class Trajectory:
             unknown = sorted(set(c.joint_name) - set(CONTACT_PARTS))
             if unknown:
                 raise ValidationError(
-                    f"{where}: unknown contact parts {unknown}; expected {', '.join(CONTACT_PARTS)}",
+                    f"{where}: unknown contact parts {unknown}; "
+                    f"expected {', '.join(CONTACT_PARTS)}",
                     field="contact.joint_name",
                 )
             for k, v in {**c.totals, **c.pairs}.items():
@@ -503,7 +513,9 @@ class Trajectory:
             raise ValidationError(f"slice [{start}, {stop}) is outside frames 0..{T}")
         frames = np.arange(start, stop)
         moves = [
-            ObjectMove(m.object_name, max(m.start_frame, start) - start, min(m.end_frame, stop - 1) - start)
+            ObjectMove(
+                m.object_name, max(m.start_frame, start) - start, min(m.end_frame, stop - 1) - start
+            )
             for m in self.object_move
             if m.end_frame >= start and m.start_frame < stop
         ]
@@ -524,7 +536,7 @@ class Trajectory:
         if not (math.isfinite(fps) and fps > 0):
             raise ValidationError(f"resample: fps must be positive, got {fps}", field="fps")
         t = self.timestamp
-        n = int(math.floor(self.duration * fps + 1e-9)) + 1
+        n = math.floor(self.duration * fps + 1e-9) + 1
         t_new = t[0] + np.arange(n) / fps
         t_new[-1] = min(t_new[-1], t[-1])
 
@@ -541,7 +553,10 @@ class Trajectory:
         hands = []
         for h in self.hands:
             pose = np.concatenate(
-                [rot(h.hand_pose[:, :3]), rot(h.hand_pose[:, 3:].reshape(-1, 15, 3)).reshape(n, 45)],
+                [
+                    rot(h.hand_pose[:, :3]),
+                    rot(h.hand_pose[:, 3:].reshape(-1, 15, 3)).reshape(n, 45),
+                ],
                 axis=1,
             )
             hands.append(
@@ -557,7 +572,9 @@ class Trajectory:
                 )
             )
         objects = [ObjectTrack(o.name, lin(o.pos), rot(o.rot_aa)) for o in self.objects]
-        nearest = np.clip(np.searchsorted(t, t_new), 1, len(t) - 1) if len(t) > 1 else np.zeros(n, int)
+        nearest = (
+            np.clip(np.searchsorted(t, t_new), 1, len(t) - 1) if len(t) > 1 else np.zeros(n, int)
+        )
         if len(t) > 1:
             left = nearest - 1
             nearest = np.where(np.abs(t_new - t[left]) <= np.abs(t[nearest] - t_new), left, nearest)

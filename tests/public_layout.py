@@ -92,7 +92,7 @@ def public_row(
     f = lambda *shape: rng.normal(size=shape).astype(np.float32)  # noqa: E731
     small = lambda *shape: (0.3 * rng.uniform(-1, 1, size=shape)).astype(np.float32)  # noqa: E731
     contact = []
-    for t in range(T):
+    for _t in range(T):
         frame = []
         for part in PARTS[: int(rng.integers(0, len(PARTS) + 1))]:
             n_pairs = int(rng.integers(1, 4))

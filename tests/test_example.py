@@ -21,7 +21,7 @@ def test_covers_pairs_and_operators_and_validates(trajs):
 
 def test_deterministic(trajs):
     again = list(example_trajectories(seed=0))
-    for a, b in zip(trajs, again):
+    for a, b in zip(trajs, again, strict=False):
         np.testing.assert_array_equal(a.hand.joint_pos, b.hand.joint_pos)
     other = next(example_trajectories(seed=1))
     assert not np.allclose(other.object.pos, trajs[0].object.pos)

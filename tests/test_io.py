@@ -40,7 +40,7 @@ def test_reads_public_layout_values(public_ds):
     ds = open_dataset(path)
     assert len(ds) == 6
     trajs = list(ds.iter_trajectories())
-    for row, t in zip(rows, trajs):
+    for row, t in zip(rows, trajs, strict=False):
         assert t.uuid == row["index"]["uuid"]
         assert t.scene == row["index"]["scene"]
         assert t.fps == 120
@@ -62,7 +62,8 @@ def test_reads_public_layout_values(public_ds):
         assert t.contacts.num_records == len(recs)
         pairs = [p for r in recs for p in r["contact_pairs"]]
         np.testing.assert_array_equal(
-            t.contacts.pairs["pos_world"], np.float32([p["pos_world"] for p in pairs]).reshape(-1, 3)
+            t.contacts.pairs["pos_world"],
+            np.float32([p["pos_world"] for p in pairs]).reshape(-1, 3),
         )
         dense = t.contacts.dense()
         n_per_frame = [sum(len(r["contact_pairs"]) for r in f) for f in row["contact"]]
@@ -92,9 +93,11 @@ def test_default_schema_round_trip_keeps_extras(public_ds, tmp_path):
     trajs = list(open_dataset(path).iter_trajectories())
     out = write_dataset(trajs, tmp_path / "default.lance")
     again = list(open_dataset(out).iter_trajectories())
-    for a, b in zip(trajs, again):
+    for a, b in zip(trajs, again, strict=False):
         np.testing.assert_array_equal(a.hand.urdf_dof, b.hand.urdf_dof)
-        np.testing.assert_array_equal(a.contacts.pairs["force_normal"], b.contacts.pairs["force_normal"])
+        np.testing.assert_array_equal(
+            a.contacts.pairs["force_normal"], b.contacts.pairs["force_normal"]
+        )
         assert b.extras["trajectory_metadata.capture_notes"].as_py() == (
             a.extras["trajectory_metadata.capture_notes"].as_py()
         )
@@ -194,7 +197,7 @@ def test_missing_column(tmp_path):
 
 
 def test_unknown_major_version(public_ds, tmp_path):
-    path, rows = public_ds
+    _path, rows = public_ds
     schema = public_schema().with_metadata({SCHEMA_VERSION_KEY: b"2.0"})
     p = tmp_path / "v2.lance"
     write_public_dataset(p, rows[:1], schema=schema)

@@ -59,7 +59,9 @@ def test_slerp_midpoint_and_endpoints():
 
 
 def test_bad_input_messages():
-    with pytest.raises(ValidationError, match=r"axis-angle must have shape \(\.\.\., 3\), got \(4,\)"):
+    with pytest.raises(
+        ValidationError, match=r"axis-angle must have shape \(\.\.\., 3\), got \(4,\)"
+    ):
         R.aa_to_matrix(np.zeros(4))
     with pytest.raises(ValidationError, match="NaN"):
         R.aa_to_quat_wxyz([np.nan, 0, 0])

@@ -72,7 +72,10 @@ def test_validate_accepts_good_trajectory():
         (lambda t: t.object.rot_aa.__setitem__(3, [0, 0, 90.0]), "exceeds 6.283 rad"),
         (lambda t: t.hand.hand_pose.__setitem__((0, 4), 4.0), r"finger joints.*exceeds 3.142"),
         (lambda t: setattr(t, "object_move", [ObjectMove("cube2", 100, 500)]), "outside frames"),
-        (lambda t: setattr(t.object, "pos", t.object.pos[:-1]), "objects.cube2..pos has 120 frames"),
+        (
+            lambda t: setattr(t.object, "pos", t.object.pos[:-1]),
+            "objects.cube2..pos has 120 frames",
+        ),
     ],
 )
 def test_validate_names_the_problem(mutate, message):
@@ -83,7 +86,9 @@ def test_validate_names_the_problem(mutate, message):
 
 
 def test_constructor_checks_shapes():
-    with pytest.raises(ValidationError, match=r"mano_hand_pose must have shape \(10, 48\), got \(10, 45\)"):
+    with pytest.raises(
+        ValidationError, match=r"mano_hand_pose must have shape \(10, 48\), got \(10, 45\)"
+    ):
         HandTrack("right", np.zeros((10, 3)), np.zeros((10, 3)), np.zeros((10, 45)))
     with pytest.raises(ValidationError, match="26 or 28 columns, got 20"):
         HandTrack("right", np.zeros((10, 3)), np.zeros((10, 3)), np.zeros((10, 48)),

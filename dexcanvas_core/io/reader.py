@@ -199,7 +199,9 @@ class LanceTrajectories:
         n = self.count_rows()
         bad = [i for i in pos if not 0 <= i < n]
         if bad:
-            raise DatasetError(f"row {bad[0]} out of range: the dataset has {n} rows", dataset=self.path)
+            raise DatasetError(
+                f"row {bad[0]} out of range: the dataset has {n} rows", dataset=self.path
+            )
         tbl = self._call(lambda: self._ds.take(pos))
         batch = tbl.combine_chunks().to_batches()[0]
         return [
@@ -220,7 +222,7 @@ class LanceTrajectories:
         gestures = _child(md, "gesture", self.path).to_pylist()
         fps = _child(md, "data_fps", self.path).to_pylist()
         frames = _child(md, "total_frames", self.path).to_pylist()
-        dur = sum(f / r for f, r in zip(frames, fps) if r)
+        dur = sum(f / r for f, r in zip(frames, fps, strict=False) if r)
         version = (self.schema.metadata or {}).get(SCHEMA_VERSION_KEY)
         return DatasetInfo(
             path=self.path,
@@ -228,7 +230,9 @@ class LanceTrajectories:
             frames=int(sum(frames)),
             duration_s=float(dur),
             fps=dict(Counter(int(f) for f in fps)),
-            pairs=dict(Counter(f"{s}/{_gesture_name(g)}" for s, g in zip(scenes, gestures))),
+            pairs=dict(
+                Counter(f"{s}/{_gesture_name(g)}" for s, g in zip(scenes, gestures, strict=True))
+            ),
             operators=dict(Counter(ops)),
             objects=dict(Counter(scenes)),
             gestures=dict(Counter(_gesture_name(g) for g in gestures)),
@@ -239,13 +243,14 @@ class LanceTrajectories:
 
     # -- row conversion ----------------------------------------------------------------------
 
+
 def _gesture_name(g: Any) -> str:
     """Manipulation type name for a stored gesture value, or the value itself if unknown."""
     try:
         from dexcanvas_core.taxonomy import manipulation_type
 
         return manipulation_type(g).name
-    except Exception:  # noqa: BLE001 - unknown codes are reported as stored
+    except Exception:
         return str(g)
 
 
@@ -342,7 +347,11 @@ def _numeric(arr: pa.Array, inner: tuple[int, ...], where: tuple[str, int, str])
     dataset, row, field = where
     T = len(arr)
     values = arr
-    while pa.types.is_list(values.type) or pa.types.is_fixed_size_list(values.type) or pa.types.is_large_list(values.type):
+    while (
+        pa.types.is_list(values.type)
+        or pa.types.is_fixed_size_list(values.type)
+        or pa.types.is_large_list(values.type)
+    ):
         if values.null_count:
             raise DatasetError("contains null entries", dataset=dataset, row=row, field=field)
         values = values.flatten()
@@ -404,7 +413,9 @@ def row_to_trajectory(
     T = timestamp.shape[0]
     fps = opt(meta, "data_fps", None)
     if fps is None:
-        raise DatasetError("missing value", dataset=dataset, row=row, field="trajectory_metadata.data_fps")
+        raise DatasetError(
+            "missing value", dataset=dataset, row=row, field="trajectory_metadata.data_fps"
+        )
     total = opt(meta, "total_frames", T)
     if total != T:
         raise DatasetError(
@@ -425,7 +436,9 @@ def row_to_trajectory(
         def arr(name: str, inner: tuple[int, ...], required: bool = True, h=h, where=where):
             if not _has(h, name):
                 if required:
-                    raise DatasetError("missing field", dataset=dataset, row=row, field=where(name)[2])
+                    raise DatasetError(
+                        "missing field", dataset=dataset, row=row, field=where(name)[2]
+                    )
                 return None
             item = _child(h, name, dataset, row)
             if item.null_count:
@@ -501,11 +514,11 @@ def row_to_trajectory(
         for m in info["object_move"]:
             moves.append(ObjectMove(m["object_name"], int(m["start_frame"]), int(m["end_frame"])))
     if info:
-        for k, v in info.items():
+        for k in info:
             if k != "object_move":
-                extras[f"trajectory_metadata.trajectory_info.{k}"] = (
-                    _child(_child(meta, "trajectory_info", dataset, row), k, dataset, row)[0]
-                )
+                extras[f"trajectory_metadata.trajectory_info.{k}"] = _child(
+                    _child(meta, "trajectory_info", dataset, row), k, dataset, row
+                )[0]
 
     contacts = None
     if "contact" in names and not col("contact").slice(i, 1).is_null()[0].as_py():
@@ -513,7 +526,9 @@ def row_to_trajectory(
 
     wrench = None
     if "object_wrench_world" in names and col("object_wrench_world")[i].is_valid:
-        wrench = _numeric(_list_item(col("object_wrench_world"), i), (6,), (dataset, row, "object_wrench_world"))
+        wrench = _numeric(
+            _list_item(col("object_wrench_world"), i), (6,), (dataset, row, "object_wrench_world")
+        )
     solver = None
     if "contact_solver" in names and col("contact_solver")[i].is_valid:
         solver = json.loads(col("contact_solver")[i].as_py())
@@ -555,7 +570,10 @@ def _read_contacts(frames_arr: pa.Array, T: int, dataset: str, row: int) -> Cont
     """``contact`` of one row: a list over frames of lists of part records."""
     if len(frames_arr) != T:
         raise DatasetError(
-            f"has {len(frames_arr)} frames, timestamp has {T}", dataset=dataset, row=row, field="contact"
+            f"has {len(frames_arr)} frames, timestamp has {T}",
+            dataset=dataset,
+            row=row,
+            field="contact",
         )
     offsets = frames_arr.offsets.to_numpy()
     counts = np.diff(offsets)
@@ -591,9 +609,13 @@ def _read_contacts(frames_arr: pa.Array, T: int, dataset: str, row: int) -> Cont
         )
     force_world = None
     if pairs_struct is not None and _has(pairs_struct, "force_world"):
-        force_world = vec(_child(pairs_struct, "force_world", dataset, row), "contact.contact_pairs.force_world")
-    elif P == 0 and pa.types.is_struct(pairs_list.type.value_type) and (
-        pairs_list.type.value_type.get_field_index("force_world") >= 0
+        force_world = vec(
+            _child(pairs_struct, "force_world", dataset, row), "contact.contact_pairs.force_world"
+        )
+    elif (
+        P == 0
+        and pa.types.is_struct(pairs_list.type.value_type)
+        and (pairs_list.type.value_type.get_field_index("force_world") >= 0)
     ):
         force_world = np.zeros((0, 3), np.float32)
     try:

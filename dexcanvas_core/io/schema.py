@@ -47,7 +47,9 @@ CONTACT_RECORD_FIELDS = [
 
 def contact_type(with_force_world: bool) -> pa.DataType:
     pair = CONTACT_PAIR_EXT if with_force_world else CONTACT_PAIR
-    return pa.list_(pa.list_(pa.struct([*CONTACT_RECORD_FIELDS, ("contact_pairs", pa.list_(pair))])))
+    return pa.list_(
+        pa.list_(pa.struct([*CONTACT_RECORD_FIELDS, ("contact_pairs", pa.list_(pair))]))
+    )
 
 
 INDEX = pa.struct(
@@ -100,7 +102,10 @@ REQUIRED_COLUMNS = ("index", "trajectory_metadata", "timestamp", "hands", "objec
 
 
 def default_schema(
-    *, urdf_dof: int = 26, contact: bool = True, contact_force_world: bool = False,
+    *,
+    urdf_dof: int = 26,
+    contact: bool = True,
+    contact_force_world: bool = False,
     wrench: bool = False,
 ) -> pa.Schema:
     """The schema this toolkit writes when no source schema is given."""

@@ -91,7 +91,7 @@ def _add_extras(schema: pa.Schema, extras: dict) -> pa.Schema:
 
 
 def _numeric_array(values: np.ndarray, typ: pa.DataType) -> pa.Array:
-    """Arrow array of ``typ`` (nested fixed/variable lists of a float/int type) from ``(N, ...)``."""
+    """Arrow array of ``typ`` (nested fixed/variable lists of numbers) from ``(N, ...)`` values."""
     if pa.types.is_fixed_size_list(typ):
         n = typ.list_size
         inner = values.reshape((-1, *values.shape[2:])) if values.ndim > 2 else values.reshape(-1)
@@ -111,11 +111,7 @@ def _list_of(items: list[pa.Array | None], typ: pa.DataType) -> pa.Array:
     lengths = [0 if a is None else len(a) for a in items]
     offsets = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int32)
     present = [a for a in items if a is not None]
-    values = (
-        pa.concat_arrays(present)
-        if present
-        else pa.array([], type=typ.value_type)
-    )
+    values = pa.concat_arrays(present) if present else pa.array([], type=typ.value_type)
     mask = pa.array([a is None for a in items]) if any(a is None for a in items) else None
     return pa.ListArray.from_arrays(pa.array(offsets, pa.int32()), values, type=typ, mask=mask)
 
@@ -128,9 +124,7 @@ def _per_frame(values: np.ndarray | None, list_type: pa.DataType) -> pa.Array | 
 
 
 def _struct(children: dict[str, pa.Array], typ: pa.StructType, mask=None) -> pa.Array:
-    return pa.StructArray.from_arrays(
-        [children[f.name] for f in typ], fields=list(typ), mask=mask
-    )
+    return pa.StructArray.from_arrays([children[f.name] for f in typ], fields=list(typ), mask=mask)
 
 
 def _extra(traj: Trajectory, key: str, typ: pa.DataType) -> pa.Array:
@@ -156,7 +150,9 @@ def _index_array(trajs: list[Trajectory], typ: pa.StructType) -> pa.Array:
         if f.name in known:
             children[f.name] = pa.array([known[f.name](t) for t in trajs], type=f.type)
         else:
-            children[f.name] = pa.concat_arrays([_extra(t, f"index.{f.name}", f.type) for t in trajs])
+            children[f.name] = pa.concat_arrays(
+                [_extra(t, f"index.{f.name}", f.type) for t in trajs]
+            )
     return _struct(children, typ)
 
 
@@ -166,7 +162,7 @@ def _metadata_array(trajs: list[Trajectory], typ: pa.StructType) -> pa.Array:
         if f.name == "data_fps":
             vals = [t.fps for t in trajs]
             if pa.types.is_integer(f.type):
-                vals = [int(round(v)) for v in vals]
+                vals = [round(v) for v in vals]
             children[f.name] = pa.array(vals, type=f.type)
         elif f.name == "total_frames":
             children[f.name] = pa.array([t.num_frames for t in trajs], type=f.type)
@@ -309,8 +305,10 @@ def _contact_array(trajs: list[Trajectory], typ: pa.ListType) -> pa.Array:
             else:
                 raise DatasetError(f"cannot write unknown contact record field {f.name!r}")
         recs = _struct(rec_children, rec_type)
-        counts = np.bincount(c.frame, minlength=c.num_frames) if c.num_records else np.zeros(
-            c.num_frames, np.int64
+        counts = (
+            np.bincount(c.frame, minlength=c.num_frames)
+            if c.num_records
+            else np.zeros(c.num_frames, np.int64)
         )
         offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
         per_row.append(pa.ListArray.from_arrays(pa.array(offsets), recs, type=frames_type))
@@ -326,7 +324,9 @@ def trajectories_to_batch(trajs: list[Trajectory], schema: pa.Schema) -> pa.Reco
         elif f.name == "trajectory_metadata":
             cols.append(_metadata_array(trajs, f.type))
         elif f.name == "timestamp":
-            cols.append(_list_of([_numeric_array(t.timestamp, f.type.value_type) for t in trajs], f.type))
+            cols.append(
+                _list_of([_numeric_array(t.timestamp, f.type.value_type) for t in trajs], f.type)
+            )
         elif f.name == "hands":
             cols.append(_hands_array(trajs, f.type))
         elif f.name == "objects":
@@ -340,7 +340,8 @@ def trajectories_to_batch(trajs: list[Trajectory], schema: pa.Schema) -> pa.Reco
         elif f.name == "contact_solver":
             cols.append(
                 pa.array(
-                    [None if t.solver_settings is None else json.dumps(t.solver_settings, sort_keys=True)
+                    [None if t.solver_settings is None
+                     else json.dumps(t.solver_settings, sort_keys=True)
                      for t in trajs],
                     type=f.type,
                 )
@@ -365,7 +366,10 @@ class _Encoder:
 
 
 def _batches(
-    trajs: Iterable[Trajectory], schema: pa.Schema | None, batch_rows: int, validate: bool,
+    trajs: Iterable[Trajectory],
+    schema: pa.Schema | None,
+    batch_rows: int,
+    validate: bool,
     enc: _Encoder,
 ) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
     it = iter(trajs)
@@ -474,7 +478,10 @@ def _replace_dir(src: Path, dest: Path) -> None:
 
 
 def export_parquet(
-    source: str | os.PathLike, dest: str | os.PathLike, *, filter: str | None = None,
+    source: str | os.PathLike,
+    dest: str | os.PathLike,
+    *,
+    filter: str | None = None,
     batch_size: int = 16,
 ) -> Path:
     """Copy a Lance dataset (optionally filtered) to one Parquet file, streaming and atomic."""
@@ -496,4 +503,3 @@ def export_parquet(
         if tmp.exists():
             tmp.unlink()
     return dest
-
