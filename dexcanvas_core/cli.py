@@ -110,11 +110,16 @@ class ExportConfig:
 
 def run_export(cfg: ExportConfig) -> Path:
     """Export a dataset (optionally filtered) to a Parquet file."""
-    from dexcanvas_core.io import export_parquet
-    from dexcanvas_core.loaders.filters import resolve_filter
+    from dexcanvas_core.io import export_parquet, open_dataset
+    from dexcanvas_core.loaders.selection import select_rows
 
-    flt = resolve_filter(cfg.manipulation_types or None, cfg.objects or None, cfg.operators or None)
-    out = export_parquet(cfg.path, cfg.out, filter=flt)
+    sel = select_rows(
+        open_dataset(cfg.path),
+        manipulation_types=list(cfg.manipulation_types) or None,
+        objects=list(cfg.objects) or None,
+        operators=list(cfg.operators) or None,
+    )
+    out = export_parquet(cfg.path, cfg.out, filter=sel.filter)
     print(f"wrote {out}")
     return out
 
