@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from dexcanvas_core.errors import DatasetError, ValidationError
+from dexcanvas_core.errors import DatasetError, DexCanvasError, ValidationError
 from dexcanvas_core.io.schema import (
     REQUIRED_COLUMNS,
     SCHEMA_VERSION_KEY,
@@ -246,11 +246,11 @@ class LanceTrajectories:
 
 def _gesture_name(g: Any) -> str:
     """Manipulation type name for a stored gesture value, or the value itself if unknown."""
-    try:
-        from dexcanvas_core.taxonomy import manipulation_type
+    from dexcanvas_core.taxonomy import manipulation_type
 
+    try:
         return manipulation_type(g).name
-    except Exception:
+    except DexCanvasError:  # a code the catalogue leaves open: reported as stored
         return str(g)
 
 

@@ -49,11 +49,11 @@ OPTIONAL_KEYS: tuple[str, ...] = ("joint_pos", "contact_force", "object_wrench")
 
 
 def _manipulation_name(gesture: str) -> str:
-    try:
-        from dexcanvas_core.taxonomy import manipulation_type
+    from dexcanvas_core.taxonomy import manipulation_type
 
+    try:
         return manipulation_type(gesture).name
-    except (ImportError, DexCanvasError):  # absent taxonomy or unknown code: as stored
+    except DexCanvasError:  # a code the catalogue leaves open: as stored
         return gesture
 
 
@@ -91,13 +91,8 @@ def trajectory_to_sample(traj: Trajectory) -> dict[str, Any]:
 
 
 def _default_path() -> str:
-    try:
-        from dexcanvas_core.builtin import default_dataset_path
-    except ImportError as e:
-        raise DexCanvasError(
-            "no built-in dataset is available in this installation; pass path= to a DexCanvas "
-            f"Lance dataset ({e})"
-        ) from e
+    from dexcanvas_core.builtin import default_dataset_path
+
     return str(default_dataset_path())
 
 

@@ -27,6 +27,7 @@ import numpy as np
 
 from dexcanvas_core.errors import DatasetError, DexCanvasError, UnknownNameError, ValidationError
 from dexcanvas_core.io import LanceTrajectories, build_filter
+from dexcanvas_core.taxonomy import manipulation_type, object_spec
 
 FilterValues = str | int | Iterable[str | int] | None
 """One name or code, several, or ``None`` (no filter)."""
@@ -60,30 +61,18 @@ def as_list(values: FilterValues, what: str) -> list[str | int] | None:
     return out or None
 
 
-def _manipulation_lookup() -> Callable[[Any], str] | None:
-    """``value → canonical type name`` through the taxonomy, or ``None`` if it is unavailable."""
-    try:
-        from dexcanvas_core.taxonomy import manipulation_type
-    except ImportError:
-        return None
+def _manipulation_lookup() -> Callable[[Any], str]:
+    """``value → canonical type name`` through the taxonomy."""
     return lambda v: manipulation_type(v).name
 
 
-def _object_lookup() -> Callable[[Any], str] | None:
-    """``value → canonical object id`` through the taxonomy, or ``None`` if it is unavailable."""
-    try:
-        from dexcanvas_core.taxonomy import object_spec
-    except ImportError:
-        return None
+def _object_lookup() -> Callable[[Any], str]:
+    """``value → canonical object id`` through the taxonomy."""
     return lambda v: object_spec(v).id
 
 
 def manipulation_spellings(name: str) -> list[str]:
     """Every spelling of one manipulation type that a release may store (name, aliases, code)."""
-    try:
-        from dexcanvas_core.taxonomy import manipulation_type
-    except ImportError:
-        return [name]
     mt = manipulation_type(name)
     out = [mt.name, *mt.aliases]
     if mt.gesture_code is not None:
