@@ -1,0 +1,196 @@
+"""One kinematic model for every backend: a Pinocchio model derived from a compiled ``MjModel``.
+
+Each robot hand is built once as a MuJoCo model (``retarget.hands``); the Pinocchio model is
+derived from it here, so the QP solver (Pinocchio), mink (MuJoCo) and the re-simulation all see
+the same joints, body placements and sites. Supported joints: hinge and slide (the hands and
+their 6-DoF floating wrists use nothing else); a body may carry several joints (MuJoCo composes
+them in order about their anchors ``jnt_pos``), which become a chain of Pinocchio joints.
+
+Configuration vectors use MuJoCo's ``qpos`` order (``nq == nv``: hinge/slide only); Pinocchio
+adds joints in the same order (MuJoCo bodies are numbered parents-first, depth-first), which
+``PinocchioKinematics`` checks at construction.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from retarget.errors import RetargetError
+
+
+def _se3(R: np.ndarray, p: np.ndarray):
+    import pinocchio as pin
+
+    return pin.SE3(np.asarray(R, dtype=np.float64), np.asarray(p, dtype=np.float64))
+
+
+def _quat_wxyz_to_R(q: np.ndarray) -> np.ndarray:
+    R = np.zeros(9)
+    mujoco.mju_quat2Mat(R, np.asarray(q, dtype=np.float64))
+    return R.reshape(3, 3)
+
+
+@dataclass
+class PinocchioKinematics:
+    """Pinocchio model + data built from an ``MjModel``, with named MuJoCo sites as frames.
+
+    Attributes:
+        model, data: the Pinocchio model and data.
+        site_frames: MuJoCo site name → Pinocchio frame id.
+        body_frames: MuJoCo body name → Pinocchio frame id (the body's own frame).
+        joint_names: MuJoCo joint names in ``qpos`` order.
+    """
+
+    mj_model: mujoco.MjModel
+    model: object = field(init=False)
+    data: object = field(init=False)
+    site_frames: dict[str, int] = field(init=False)
+    body_frames: dict[str, int] = field(init=False)
+    joint_names: list[str] = field(init=False)
+
+    def __post_init__(self) -> None:
+        import pinocchio as pin
+
+        m = self.mj_model
+        if m.nq != m.nv:
+            raise RetargetError(
+                "PinocchioKinematics supports hinge and slide joints only (nq == nv); "
+                f"this model has nq={m.nq}, nv={m.nv}"
+            )
+        model = pin.Model()
+        model.name = "from_mjmodel"
+        # Per MuJoCo body: the Pinocchio joint id that moves it and the placement of the body
+        # frame in that joint's frame.
+        body_joint = {0: 0}
+        body_in_joint = {0: pin.SE3.Identity()}
+        body_frames: dict[str, int] = {}
+        joint_names: list[str] = []
+        for b in range(1, m.nbody):
+            parent = int(m.body_parentid[b])
+            parent_jid = body_joint[parent]
+            X_parent_body = body_in_joint[parent] * _se3(
+                _quat_wxyz_to_R(m.body_quat[b]), m.body_pos[b]
+            )
+            jnt_ids = [j for j in range(m.njnt) if m.jnt_bodyid[j] == b]
+            cur_jid = parent_jid
+            # Placement of the next joint in the current joint's frame, and the current anchor.
+            X_prev = X_parent_body
+            anchor_prev = np.zeros(3)
+            for j in jnt_ids:
+                jtype = int(m.jnt_type[j])
+                axis = np.asarray(m.jnt_axis[j], dtype=np.float64)
+                anchor = np.asarray(m.jnt_pos[j], dtype=np.float64)
+                placement = X_prev * _se3(np.eye(3), anchor - anchor_prev)
+                if jtype == mujoco.mjtJoint.mjJNT_HINGE:
+                    jm = pin.JointModelRevoluteUnaligned(axis)
+                elif jtype == mujoco.mjtJoint.mjJNT_SLIDE:
+                    jm = pin.JointModelPrismaticUnaligned(axis)
+                else:
+                    raise RetargetError(
+                        f"joint {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j)!r} has an "
+                        "unsupported type (free/ball); hands use hinge and slide joints"
+                    )
+                name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint{j}"
+                lo, hi = (m.jnt_range[j] if m.jnt_limited[j] else (-1e10, 1e10))
+                cur_jid = model.addJoint(
+                    cur_jid,
+                    jm,
+                    placement,
+                    name,
+                    np.full(1, 1e3),
+                    np.full(1, 1e3),
+                    np.array([lo], dtype=np.float64),
+                    np.array([hi], dtype=np.float64),
+                )
+                joint_names.append(name)
+                X_prev = pin.SE3.Identity()
+                anchor_prev = anchor
+            if jnt_ids:
+                X_joint_body = _se3(np.eye(3), -anchor_prev)
+            else:
+                X_joint_body = X_parent_body
+            body_joint[b] = cur_jid
+            body_in_joint[b] = X_joint_body
+            inertia = pin.Inertia(
+                float(m.body_mass[b]),
+                np.asarray(m.body_ipos[b], dtype=np.float64),
+                _quat_wxyz_to_R(m.body_iquat[b])
+                @ np.diag(m.body_inertia[b])
+                @ _quat_wxyz_to_R(m.body_iquat[b]).T,
+            )
+            model.appendBodyToJoint(cur_jid, inertia.se3Action(X_joint_body), pin.SE3.Identity())
+            bname = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) or f"body{b}"
+            body_frames[bname] = model.addFrame(
+                pin.Frame(bname, cur_jid, X_joint_body, pin.FrameType.OP_FRAME)
+            )
+        site_frames: dict[str, int] = {}
+        for s in range(m.nsite):
+            b = int(m.site_bodyid[s])
+            X = body_in_joint[b] * _se3(_quat_wxyz_to_R(m.site_quat[s]), m.site_pos[s])
+            sname = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_SITE, s) or f"site{s}"
+            site_frames[sname] = model.addFrame(
+                pin.Frame(sname, body_joint[b], X, pin.FrameType.OP_FRAME)
+            )
+        mj_names = [
+            mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint{j}" for j in range(m.njnt)
+        ]
+        if joint_names != mj_names:
+            raise RetargetError(
+                "MuJoCo joint order is not depth-first; cannot align qpos with Pinocchio"
+            )
+        self.model = model
+        self.data = model.createData()
+        self.site_frames = site_frames
+        self.body_frames = body_frames
+        self.joint_names = joint_names
+
+    @property
+    def nq(self) -> int:
+        return self.model.nq
+
+    def forward(self, q: np.ndarray) -> None:
+        """Joint placements, frame placements and joint Jacobians at ``q`` (MuJoCo qpos order)."""
+        import pinocchio as pin
+
+        q = np.asarray(q, dtype=np.float64)
+        pin.computeJointJacobians(self.model, self.data, q)
+        pin.updateFramePlacements(self.model, self.data)
+
+    def frame_id(self, site: str) -> int:
+        try:
+            return self.site_frames[site]
+        except KeyError:
+            raise RetargetError(
+                f"unknown site {site!r}; model sites: {', '.join(sorted(self.site_frames))}"
+            ) from None
+
+    def site_position(self, site: str) -> np.ndarray:
+        """(3,) world position [m] of a site after :meth:`forward`."""
+        return self.data.oMf[self.frame_id(site)].translation.copy()
+
+    def site_rotation(self, site: str) -> np.ndarray:
+        """(3, 3) world rotation of a site after :meth:`forward`."""
+        return self.data.oMf[self.frame_id(site)].rotation.copy()
+
+    def site_jacobian(self, site: str) -> np.ndarray:
+        """(6, nv) Jacobian of a site: linear velocity of its origin and angular velocity, both
+        in world axes (Pinocchio ``LOCAL_WORLD_ALIGNED``), after :meth:`forward`."""
+        import pinocchio as pin
+
+        return pin.getFrameJacobian(
+            self.model, self.data, self.frame_id(site), pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        )
+
+    def point_jacobian(self, body: str, p_world: np.ndarray) -> np.ndarray:
+        """(3, nv) Jacobian of a point rigidly attached to ``body``, given in world coordinates."""
+        import pinocchio as pin
+
+        fid = self.body_frames[body]
+        J = pin.getFrameJacobian(self.model, self.data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+        r = np.asarray(p_world) - self.data.oMf[fid].translation
+        # v_point = v_origin + ω × r = v_origin - [r]× ω
+        rx = np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
+        return J[:3] - rx @ J[3:]
