@@ -94,7 +94,7 @@ class PinocchioKinematics:
                         "unsupported type (free/ball); hands use hinge and slide joints"
                     )
                 name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint{j}"
-                lo, hi = (m.jnt_range[j] if m.jnt_limited[j] else (-1e10, 1e10))
+                lo, hi = m.jnt_range[j] if m.jnt_limited[j] else (-1e10, 1e10)
                 cur_jid = model.addJoint(
                     cur_jid,
                     jm,
@@ -180,9 +180,10 @@ class PinocchioKinematics:
         in world axes (Pinocchio ``LOCAL_WORLD_ALIGNED``), after :meth:`forward`."""
         import pinocchio as pin
 
-        return pin.getFrameJacobian(
+        J = pin.getFrameJacobian(
             self.model, self.data, self.frame_id(site), pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         )
+        return np.asarray(J).reshape(6, self.model.nv)  # eigenpy returns (6,) when nv == 1
 
     def point_jacobian(self, body: str, p_world: np.ndarray) -> np.ndarray:
         """(3, nv) Jacobian of a point rigidly attached to ``body``, given in world coordinates."""
@@ -190,6 +191,7 @@ class PinocchioKinematics:
 
         fid = self.body_frames[body]
         J = pin.getFrameJacobian(self.model, self.data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+        J = np.asarray(J).reshape(6, self.model.nv)
         r = np.asarray(p_world) - self.data.oMf[fid].translation
         # v_point = v_origin + ω × r = v_origin - [r]× ω
         rx = np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])

@@ -110,11 +110,11 @@ def test_point_jacobian_matches_finite_differences(toy):
 
 
 def test_limits_and_names(toy):
-    m, kin = toy
+    _, kin = toy
     assert kin.joint_names[:6] == ["tx", "ty", "tz", "rx", "ry", "rz"]
     j = kin.joint_names.index("ff_mcp")
     assert kin.model.lowerPositionLimit[j] == 0 and kin.model.upperPositionLimit[j] == 1.6
-    with pytest.raises(RetargetError, match="unknown site 'nope'.*ff_tip_site"):
+    with pytest.raises(RetargetError, match=r"unknown site 'nope'.*ff_tip_site"):
         kin.site_position("nope")
 
 

@@ -1,0 +1,17 @@
+"""QP objectives: each a residual and its Jacobian (see ``base.Objective``)."""
+
+from retarget.objectives.base import Objective
+from retarget.objectives.contacts import ContactObjective
+from retarget.objectives.keypoints import KeypointObjective, VectorObjective
+from retarget.objectives.regularization import PostureObjective, SmoothnessObjective
+from retarget.objectives.wrist import WristPoseObjective
+
+__all__ = [
+    "ContactObjective",
+    "KeypointObjective",
+    "Objective",
+    "PostureObjective",
+    "SmoothnessObjective",
+    "VectorObjective",
+    "WristPoseObjective",
+]

@@ -1,0 +1,49 @@
+"""Objective base: a weighted least-squares term ``‖e(q) + J(q) Δq‖²_W`` of the per-frame QP."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+
+from retarget.state import RobotState
+
+
+class Objective(ABC):
+    """A residual ``e(q)`` with Jacobian ``J = ∂e/∂q``; the QP minimises ``Σ w ‖e + J Δq‖²``.
+
+    Subclasses implement :meth:`error` and :meth:`jacobian`; :meth:`qp_terms` turns them into
+    the QP's ``(H, c)`` contribution so value and gradient never disagree.
+    """
+
+    name: str = "objective"
+
+    def __init__(self, weight: float | np.ndarray = 1.0):
+        self.weight = weight
+
+    @abstractmethod
+    def error(self, state: RobotState) -> np.ndarray:
+        """(m,) residual at ``state``."""
+
+    @abstractmethod
+    def jacobian(self, state: RobotState) -> np.ndarray:
+        """(m, nv) derivative of :meth:`error` with respect to ``q``."""
+
+    def weights(self, m: int) -> np.ndarray:
+        w = np.broadcast_to(np.asarray(self.weight, dtype=np.float64), (m,))
+        return w
+
+    def qp_terms(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
+        """``(H, c)`` with ``H = Jᵀ W J`` and ``c = Jᵀ W e``."""
+        e = self.error(state)
+        if e.size == 0:
+            return np.zeros((state.nv, state.nv)), np.zeros(state.nv)
+        J = self.jacobian(state)
+        w = self.weights(e.shape[0])
+        JW = J.T * w
+        return JW @ J, JW @ e
+
+    def cost(self, state: RobotState) -> float:
+        """``Σ w e²`` at ``state`` (for logging and line search)."""
+        e = self.error(state)
+        return float(np.sum(self.weights(e.shape[0]) * e * e)) if e.size else 0.0

@@ -1,0 +1,95 @@
+"""Keypoint positions and fingertip-to-fingertip vectors."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from retarget.errors import RetargetError
+from retarget.objectives.base import Objective
+from retarget.state import RobotState
+
+
+class KeypointObjective(Objective):
+    """Robot sites at target positions: ``e = p_site(q) − p_target`` (world, [m])."""
+
+    name = "keypoints"
+
+    def __init__(self, sites: Sequence[str], weight: float | np.ndarray = 1.0):
+        super().__init__(weight)
+        self.sites = list(sites)
+        self.targets = np.zeros((len(self.sites), 3))
+
+    def set_targets(self, targets_world: np.ndarray) -> None:
+        t = np.asarray(targets_world, dtype=np.float64)
+        if t.shape != (len(self.sites), 3):
+            raise RetargetError(
+                f"{self.name}: targets must have shape ({len(self.sites)}, 3), got {t.shape}"
+            )
+        if not np.all(np.isfinite(t)):
+            raise RetargetError(f"{self.name}: targets contain NaN or inf")
+        self.targets = t
+
+    def weights(self, m: int) -> np.ndarray:
+        w = np.asarray(self.weight, dtype=np.float64)
+        if w.ndim == 1 and w.shape[0] == len(self.sites):  # one weight per site
+            return np.repeat(w, 3)
+        return np.broadcast_to(w, (m,))
+
+    def error(self, state: RobotState) -> np.ndarray:
+        p = (
+            np.stack([state.kin.site_position(s) for s in self.sites])
+            if self.sites
+            else self.targets
+        )
+        return (p - self.targets).reshape(-1)
+
+    def jacobian(self, state: RobotState) -> np.ndarray:
+        if not self.sites:
+            return np.zeros((0, state.nv))
+        return np.concatenate([state.kin.site_jacobian(s)[:3] for s in self.sites], axis=0)
+
+
+class VectorObjective(Objective):
+    """Vectors between site pairs match targets: ``e = (p_a − p_b) − v_target``.
+
+    Keeps pinches closed: the thumb-to-index vector of the robot follows the human's even when
+    absolute positions cannot both be reached.
+    """
+
+    name = "vectors"
+
+    def __init__(self, pairs: Sequence[tuple[str, str]], weight: float | np.ndarray = 1.0):
+        super().__init__(weight)
+        self.pairs = list(pairs)
+        self.targets = np.zeros((len(self.pairs), 3))
+
+    def set_targets(self, vectors_world: np.ndarray) -> None:
+        v = np.asarray(vectors_world, dtype=np.float64)
+        if v.shape != (len(self.pairs), 3) or not np.all(np.isfinite(v)):
+            raise RetargetError(
+                f"vectors: targets must be finite ({len(self.pairs)}, 3), got {v.shape}"
+            )
+        self.targets = v
+
+    def weights(self, m: int) -> np.ndarray:
+        w = np.asarray(self.weight, dtype=np.float64)
+        if w.ndim == 1 and w.shape[0] == len(self.pairs):
+            return np.repeat(w, 3)
+        return np.broadcast_to(w, (m,))
+
+    def error(self, state: RobotState) -> np.ndarray:
+        if not self.pairs:
+            return np.zeros(0)
+        k = state.kin
+        d = np.stack([k.site_position(a) - k.site_position(b) for a, b in self.pairs])
+        return (d - self.targets).reshape(-1)
+
+    def jacobian(self, state: RobotState) -> np.ndarray:
+        if not self.pairs:
+            return np.zeros((0, state.nv))
+        k = state.kin
+        return np.concatenate(
+            [k.site_jacobian(a)[:3] - k.site_jacobian(b)[:3] for a, b in self.pairs], axis=0
+        )

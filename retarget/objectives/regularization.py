@@ -1,0 +1,48 @@
+"""Posture and temporal smoothness."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from retarget.objectives.base import Objective
+from retarget.state import RobotState
+
+
+class PostureObjective(Objective):
+    """Joints near a reference posture: ``e = S (q − q_ref)`` (``S`` selects joints)."""
+
+    name = "posture"
+
+    def __init__(self, q_ref: np.ndarray, weight: float | np.ndarray = 1e-3, mask=None):
+        super().__init__(weight)
+        self.q_ref = np.asarray(q_ref, dtype=np.float64)
+        self.mask = np.ones_like(self.q_ref, bool) if mask is None else np.asarray(mask, bool)
+
+    def error(self, state: RobotState) -> np.ndarray:
+        return (state.q - self.q_ref)[self.mask]
+
+    def jacobian(self, state: RobotState) -> np.ndarray:
+        return np.eye(state.nv)[self.mask]
+
+
+class SmoothnessObjective(Objective):
+    """Stay near the previous frame's solution: ``e = q − q_prev`` (temporal smoothness)."""
+
+    name = "smoothness"
+
+    def __init__(self, weight: float | np.ndarray = 1e-2):
+        super().__init__(weight)
+        self.q_prev: np.ndarray | None = None
+
+    def set_previous(self, q_prev: np.ndarray | None) -> None:
+        self.q_prev = None if q_prev is None else np.asarray(q_prev, dtype=np.float64).copy()
+
+    def error(self, state: RobotState) -> np.ndarray:
+        if self.q_prev is None:
+            return np.zeros(0)
+        return state.q - self.q_prev
+
+    def jacobian(self, state: RobotState) -> np.ndarray:
+        if self.q_prev is None:
+            return np.zeros((0, state.nv))
+        return np.eye(state.nv)

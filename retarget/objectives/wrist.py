@@ -1,0 +1,55 @@
+"""Wrist (robot base) pose."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from retarget.errors import RetargetError
+from retarget.objectives.base import Objective
+from retarget.state import RobotState
+
+
+class WristPoseObjective(Objective):
+    """A site's pose at a target: ``e = [p − p*; log(R R*ᵀ)]`` (world axes, [m] and [rad]).
+
+    The rotation error is the rotation vector of ``R R*ᵀ`` (world frame); its Jacobian is the
+    site's angular Jacobian, exact at ``R = R*`` and a damped-Newton approximation elsewhere.
+    ``weight`` may be ``(w_position, w_rotation)``.
+    """
+
+    name = "wrist"
+
+    def __init__(self, site: str, weight: float | tuple[float, float] = (1.0, 0.1)):
+        super().__init__(weight)
+        self.site = site
+        self.p_target = np.zeros(3)
+        self.R_target = np.eye(3)
+
+    def set_target(self, p_world: np.ndarray, R_world: np.ndarray) -> None:
+        p = np.asarray(p_world, dtype=np.float64)
+        R = np.asarray(R_world, dtype=np.float64)
+        if (
+            p.shape != (3,)
+            or R.shape != (3, 3)
+            or not (np.isfinite(p).all() and np.isfinite(R).all())
+        ):
+            raise RetargetError(
+                f"wrist target must be finite (3,), (3, 3); got {p.shape}, {R.shape}"
+            )
+        self.p_target, self.R_target = p, R
+
+    def weights(self, m: int) -> np.ndarray:
+        w = np.asarray(self.weight, dtype=np.float64)
+        if w.shape == (2,):
+            return np.repeat(w, 3)
+        return np.broadcast_to(w, (m,))
+
+    def error(self, state: RobotState) -> np.ndarray:
+        p = state.kin.site_position(self.site)
+        R = state.kin.site_rotation(self.site)
+        rot = Rotation.from_matrix(R @ self.R_target.T).as_rotvec()
+        return np.concatenate([p - self.p_target, rot])
+
+    def jacobian(self, state: RobotState) -> np.ndarray:
+        return state.kin.site_jacobian(self.site)

@@ -1,0 +1,211 @@
+"""Every objective and limit: Jacobians against finite differences; QP solves a round trip."""
+
+import mujoco
+import numpy as np
+import pytest
+from test_kinematics import TOY
+
+from retarget.kinematics import PinocchioKinematics
+from retarget.limits import CollisionLimit, CouplingLimit, JointLimit, VelocityLimit
+from retarget.objectives import (
+    ContactObjective,
+    KeypointObjective,
+    PostureObjective,
+    SmoothnessObjective,
+    VectorObjective,
+    WristPoseObjective,
+)
+from retarget.qp import QPSolveError, build_qp, solve_qp
+from retarget.state import RobotState
+
+SITES = ["ff_tip_site", "th_tip_site"]
+
+
+@pytest.fixture(scope="module")
+def kin():
+    m = mujoco.MjModel.from_xml_string(TOY)
+    return PinocchioKinematics(m)
+
+
+def _state(kin, q):
+    kin.forward(q)
+    return RobotState(q=np.asarray(q, dtype=np.float64), kin=kin)
+
+
+def _fd_check(obj, kin, q, eps=1e-7, atol=1e-5):
+    s = _state(kin, q)
+    e0, J = obj.error(s), obj.jacobian(s)
+    assert J.shape == (e0.shape[0], q.shape[0])
+    for i in range(q.shape[0]):
+        dq = np.zeros_like(q)
+        dq[i] = eps
+        e1 = obj.error(_state(kin, q + dq))
+        np.testing.assert_allclose(
+            (e1 - e0) / eps, J[:, i], atol=atol, err_msg=f"{obj.name} dof {i}"
+        )
+
+
+def _objectives(kin, rng):
+    kp = KeypointObjective(SITES)
+    kp.set_targets(rng.normal(size=(2, 3)))
+    vec = VectorObjective([("ff_tip_site", "th_tip_site")])
+    vec.set_targets(rng.normal(size=(1, 3)))
+    wr = WristPoseObjective("ff_tip_site")
+    # Target close to the current pose: the rotation Jacobian is exact at zero error.
+    c = ContactObjective(SITES, pad_axis=np.array([0.0, 1.0, 0.0]))
+    c.set_contacts(np.array([True, True]), rng.normal(size=(2, 3)), rng.normal(size=(2, 3)))
+    post = PostureObjective(rng.normal(size=kin.nq))
+    sm = SmoothnessObjective()
+    sm.set_previous(rng.normal(size=kin.nq))
+    return [kp, vec, wr, c, post, sm]
+
+
+def test_objective_jacobians_match_finite_differences(kin):
+    rng = np.random.default_rng(0)
+    objs = _objectives(kin, rng)
+    for _ in range(3):
+        q = rng.uniform(-0.8, 0.8, size=kin.nq)
+        kin.forward(q)
+        wr = objs[2]
+        wr.set_target(kin.site_position("ff_tip_site") + 0.01, kin.site_rotation("ff_tip_site"))
+        for obj in objs:
+            _fd_check(obj, kin, q)
+
+
+def test_qp_terms_are_gauss_newton_of_the_cost(kin):
+    rng = np.random.default_rng(1)
+    obj = _objectives(kin, rng)[0]
+    obj.weight = np.array([2.0, 0.5])
+    q = rng.uniform(-0.5, 0.5, size=kin.nq)
+    s = _state(kin, q)
+    H, c = obj.qp_terms(s)
+    # ∇(½ Σ w e²) = Jᵀ W e = c
+    eps = 1e-7
+    grad = np.array(
+        [
+            (obj.cost(_state(kin, q + eps * np.eye(kin.nq)[i])) - obj.cost(_state(kin, q)))
+            / (2 * eps)
+            for i in range(kin.nq)
+        ]
+    )
+    np.testing.assert_allclose(grad, c, atol=1e-5)
+    assert np.all(np.linalg.eigvalsh(H) > -1e-12)
+
+
+def test_keypoint_round_trip_recovers_sites(kin):
+    """Random robot pose → its sites → solve from another pose → same sites within 1 mm."""
+    rng = np.random.default_rng(2)
+    lower, upper = kin.model.lowerPositionLimit.copy(), kin.model.upperPositionLimit.copy()
+    lower[lower < -10], upper[upper > 10] = -1.0, 1.0
+    limited = np.ones(kin.nq, bool)
+    for _ in range(5):
+        q_true = rng.uniform(lower, upper) * 0.8
+        kin.forward(q_true)
+        targets = np.stack([kin.site_position(s) for s in SITES])
+        R = kin.site_rotation("ff_tip_site")
+        kp = KeypointObjective(SITES, weight=1.0)
+        kp.set_targets(targets)
+        wr = WristPoseObjective("ff_tip_site", weight=(0.0, 0.1))
+        wr.set_target(targets[0], R)
+        q = np.clip(q_true + rng.normal(scale=0.2, size=kin.nq), lower, upper)
+        limits = [JointLimit(lower, upper, limited)]
+        for _ in range(50):
+            s = _state(kin, q)
+            q = q + solve_qp(build_qp(s, [kp, wr], limits, damping=1e-4))
+        s = _state(kin, q)
+        assert np.abs(kp.error(s)).max() < 1e-3
+        assert np.all(q >= lower - 1e-9) and np.all(q <= upper + 1e-9)
+
+
+def test_joint_and_velocity_limits_bound_the_step(kin):
+    q = np.zeros(kin.nq)
+    s = _state(kin, q)
+    kp = KeypointObjective(SITES)
+    kp.set_targets(np.full((2, 3), 5.0))  # unreachable: pulls hard
+    vmax = 0.5
+    dq = solve_qp(build_qp(s, [kp], [VelocityLimit(vmax)]))
+    assert np.abs(dq).max() <= vmax * s.dt + 1e-9
+
+
+COUPLED = """
+<mujoco>
+  <compiler angle="radian"/>
+  <worldbody>
+    <body>
+      <joint name="a" axis="0 0 1"/>
+      <geom size="0.01"/>
+      <body pos="0.1 0 0">
+        <joint name="b" axis="0 0 1"/>
+        <geom size="0.01"/>
+        <site name="tip" pos="0.1 0 0"/>
+      </body>
+    </body>
+  </worldbody>
+  <equality><joint joint1="b" joint2="a" polycoef="0 0.7 0.1 0 0"/></equality>
+</mujoco>
+"""
+
+
+def test_coupling_rows_hold_after_solving():
+    m = mujoco.MjModel.from_xml_string(COUPLED)
+    kin = PinocchioKinematics(m)
+    coupling = CouplingLimit.from_mjmodel(m)
+    kp = KeypointObjective(["tip"])
+    kp.set_targets(np.array([[0.05, 0.15, 0.0]]))
+    q = np.array([0.3, -0.2])  # violates b = 0.7 a + 0.1 a²
+    for _ in range(20):
+        q = q + solve_qp(build_qp(_state(kin, q), [kp], [coupling], damping=1e-4))
+    assert q[1] == pytest.approx(0.7 * q[0] + 0.1 * q[0] ** 2, abs=1e-6)
+
+
+OBJECT_SCENE = """
+<mujoco>
+  <compiler angle="radian"/>
+  <worldbody>
+    <body name="finger">
+      <joint name="x" type="slide" axis="1 0 0"/>
+      <geom name="pad" type="sphere" size="0.01"/>
+      <site name="tip" pos="0 0 0"/>
+    </body>
+    <body name="object" mocap="true" pos="0.1 0 0">
+      <geom name="box" type="box" size="0.02 0.02 0.02"/>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def test_collision_limit_stops_at_the_surface():
+    m = mujoco.MjModel.from_xml_string(OBJECT_SCENE)
+    d = mujoco.MjData(m)
+    kin = PinocchioKinematics(m)
+    pad = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "pad")
+    box = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "box")
+    lim = CollisionLimit(m, d, [(pad, box)], hand_nq=1, margin=0.0, distmax=0.2)
+    kp = KeypointObjective(["tip"])
+    kp.set_targets(np.array([[0.1, 0.0, 0.0]]))  # the box centre: would penetrate
+    q = np.zeros(1)
+    for _ in range(30):
+        q = q + solve_qp(build_qp(_state(kin, q), [kp], [lim], damping=1e-6))
+    # Sphere of radius 1 cm stops at the box face x = 0.08: centre at 0.07.
+    assert q[0] == pytest.approx(0.07, abs=5e-4)
+    # The linearised row matches the true distance change.
+    s = _state(kin, np.array([0.03]))
+    G, h = lim.inequalities(s)
+    assert h[0] == pytest.approx(0.08 - 0.03 - 0.01, abs=1e-6)
+    np.testing.assert_allclose(G[0], [1.0], atol=1e-9)
+
+
+def test_infeasible_problem_raises_with_problem_attached(kin):
+    s = _state(kin, np.zeros(kin.nq))
+    kp = KeypointObjective(SITES)
+    kp.set_targets(np.zeros((2, 3)))
+    G = np.eye(kin.nq)[:1]
+    bad = type(
+        "Bad",
+        (JointLimit,),
+        {"inequalities": lambda self, st: (np.vstack([G, -G]), np.array([-1.0, -1.0]))},
+    )
+    with pytest.raises(QPSolveError, match="no solution") as e:
+        solve_qp(build_qp(s, [kp], [bad(np.zeros(1), np.zeros(1))]))
+    assert e.value.problem.G.shape == (2, kin.nq)
