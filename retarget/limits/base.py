@@ -8,7 +8,11 @@ from retarget.state import RobotState
 
 
 class Limit:
-    """Base of the QP limits (override one or both methods). Returns inequality rows ``(G, h)`` with ``G Δq ≤ h`` and/or equality rows ``(A, b)``."""
+    """Base of the QP limits; override one or both methods.
+
+    ``inequalities`` returns rows ``(G, h)`` with ``G Δq ≤ h``; ``equalities`` returns ``(A, b)``
+    with ``A Δq = b``. The defaults add no rows.
+    """
 
     name: str = "limit"
 
