@@ -196,3 +196,60 @@ class PinocchioKinematics:
         # v_point = v_origin + ω × r = v_origin - [r]× ω
         rx = np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
         return J[:3] - rx @ J[3:]
+
+
+class MujocoKinematics:
+    """The same kinematic queries on MuJoCo itself (the mink backend's view of the model).
+
+    ``forward`` runs ``mj_kinematics`` and ``mj_comPos`` (what the Jacobian functions need) on
+    the first ``nq`` entries of ``qpos``; other entries (e.g. a mocap object) are left alone.
+    """
+
+    def __init__(
+        self, model: mujoco.MjModel, data: mujoco.MjData | None = None, nq: int | None = None
+    ):
+        self.mj_model = model
+        self.data = data if data is not None else mujoco.MjData(model)
+        self._nq = model.nq if nq is None else nq
+        self._site_ids: dict[str, int] = {}
+        self._body_ids: dict[str, int] = {}
+
+    @property
+    def nq(self) -> int:
+        return self._nq
+
+    def forward(self, q: np.ndarray) -> None:
+        self.data.qpos[: self._nq] = q
+        mujoco.mj_kinematics(self.mj_model, self.data)
+        mujoco.mj_comPos(self.mj_model, self.data)
+
+    def _site(self, site: str) -> int:
+        sid = self._site_ids.get(site)
+        if sid is None:
+            sid = mujoco.mj_name2id(self.mj_model, mujoco.mjtObj.mjOBJ_SITE, site)
+            if sid < 0:
+                raise RetargetError(f"unknown site {site!r}")
+            self._site_ids[site] = sid
+        return sid
+
+    def site_position(self, site: str) -> np.ndarray:
+        return self.data.site_xpos[self._site(site)].copy()
+
+    def site_rotation(self, site: str) -> np.ndarray:
+        return self.data.site_xmat[self._site(site)].reshape(3, 3).copy()
+
+    def site_jacobian(self, site: str) -> np.ndarray:
+        J = np.zeros((6, self.mj_model.nv))
+        mujoco.mj_jacSite(self.mj_model, self.data, J[:3], J[3:], self._site(site))
+        return J[:, : self._nq]
+
+    def point_jacobian(self, body: str, p_world: np.ndarray) -> np.ndarray:
+        bid = self._body_ids.get(body)
+        if bid is None:
+            bid = mujoco.mj_name2id(self.mj_model, mujoco.mjtObj.mjOBJ_BODY, body)
+            if bid < 0:
+                raise RetargetError(f"unknown body {body!r}")
+            self._body_ids[body] = bid
+        jp = np.zeros((3, self.mj_model.nv))
+        mujoco.mj_jac(self.mj_model, self.data, jp, None, np.asarray(p_world, np.float64), bid)
+        return jp[:, : self._nq]

@@ -124,3 +124,28 @@ def test_free_joint_is_refused():
     )
     with pytest.raises(RetargetError, match="hinge and slide joints only"):
         PinocchioKinematics(m)
+
+
+def test_mujoco_and_pinocchio_backends_agree(toy):
+    from retarget.kinematics import MujocoKinematics
+
+    m, pin_kin = toy
+    mj_kin = MujocoKinematics(m)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        q = rng.uniform(-1, 1, size=m.nq)
+        pin_kin.forward(q)
+        mj_kin.forward(q)
+        for site in ("ff_tip_site", "th_tip_site"):
+            np.testing.assert_allclose(
+                mj_kin.site_position(site), pin_kin.site_position(site), atol=1e-10
+            )
+            np.testing.assert_allclose(
+                mj_kin.site_jacobian(site), pin_kin.site_jacobian(site), atol=1e-10
+            )
+        p = pin_kin.site_position("ff_tip_site") + 0.01
+        np.testing.assert_allclose(
+            mj_kin.point_jacobian("ff_distal", p),
+            pin_kin.point_jacobian("ff_distal", p),
+            atol=1e-10,
+        )

@@ -1,0 +1,461 @@
+"""Retargeting a human demonstration onto a robot hand: a QP per frame, warm-started in time.
+
+Per frame the human targets are
+
+* the wrist: MANO's wrist frame (``R = exp(global_rot_aa)``, origin at keypoint 0) is the robot's
+  ``wrist`` body frame by construction of the hand models (``retarget.hands.base``);
+* keypoints: every MANO21 keypoint the robot can match (``hand.keypoint_map``);
+
+positions (wrist and keypoints) are scaled by the hand's size ratio ``hand.scale`` about the
+object's centre (about the wrist when there is no object): the robot hand is the human hand
+enlarged around the object, so its fingertips land just outside the surface and the contact
+terms below close them onto it, instead of the wrist pinning a larger hand into the object;
+* fingertip-to-fingertip vectors from the thumb (scaled), which keep pinches closed;
+* contacts: where the human fingertip touches the object (from the trajectory's contact records
+  when present, else a fingertip within ``contact_threshold`` of the object surface), the robot
+  fingertip site goes to the same surface point (unscaled, in the object's frame);
+
+and the limits are the joint ranges, velocity bounds, the model's couplings and non-penetration
+of the hand's collision geoms and the object. The same objectives run on the Pinocchio backend
+(default; our QP through ``qpsolvers``) or the mink backend (``mink.solve_ik`` with the objectives
+as mink tasks and mink's own configuration and collision limits).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Literal
+
+import mujoco
+import numpy as np
+
+from dexcanvas_core.keypoints import FINGERS, MANO21
+from dexcanvas_core.rotations import aa_to_matrix
+from dexcanvas_core.trajectory import Trajectory
+from retarget.errors import RetargetError
+from retarget.kinematics import MujocoKinematics, PinocchioKinematics
+from retarget.limits import CollisionLimit, CouplingLimit, JointLimit, VelocityLimit
+from retarget.objectives import (
+    ContactObjective,
+    KeypointObjective,
+    PostureObjective,
+    SmoothnessObjective,
+    VectorObjective,
+    WristPoseObjective,
+)
+from retarget.qp import build_qp, solve_qp
+from retarget.scene import Scene, build_retarget_scene
+from retarget.state import RobotState
+
+log = logging.getLogger(__name__)
+
+Backend = Literal["pinocchio", "mink"]
+
+
+@dataclass(frozen=True)
+class RetargetConfig:
+    """Weights and switches of the per-frame QP."""
+
+    backend: Backend = "pinocchio"
+    """``pinocchio`` (our QP on Pinocchio kinematics) or ``mink`` (mink on MuJoCo)."""
+    iterations: int = 3
+    """Gauss–Newton iterations per frame (warm-started from the previous frame)."""
+    first_frame_iterations: int = 30
+    """Iterations on the first frame (starting from the open posture)."""
+    solver: str = "daqp"
+    w_wrist_pos: float = 20.0
+    w_wrist_rot: float = 2.0
+    w_tips: float = 10.0
+    w_joints: float = 2.0
+    w_vectors: float = 5.0
+    w_contacts: float = 50.0
+    w_posture: float = 1e-3
+    w_smooth: float = 0.05
+    damping: float = 1e-5
+    """Levenberg–Marquardt damping of the step."""
+    use_contacts: bool = True
+    use_collision: bool = True
+    penetration_margin: float = 0.001
+    """Penetration [m] the non-penetration rows allow (soft contacts need a little)."""
+    collision_distmax: float = 0.03
+    """Hand–object pairs farther than this [m] are left out of an iterate."""
+    contact_threshold: float = 0.006
+    """Human fingertip–surface distance [m] below which a fingertip is in contact (inferred)."""
+    max_joint_speed: float = 20.0
+    """Velocity bound [rad/s or m/s] per joint."""
+
+    def validate(self) -> RetargetConfig:
+        if self.backend not in ("pinocchio", "mink"):
+            raise RetargetError(f"unknown backend {self.backend!r}; use pinocchio or mink")
+        if self.iterations < 1 or self.first_frame_iterations < 1:
+            raise RetargetError("iterations must be >= 1")
+        for k, v in self.__dict__.items():
+            if k.startswith("w_") and not (np.isfinite(v) and v >= 0):
+                raise RetargetError(f"weight {k} must be finite and >= 0, got {v}")
+        return self
+
+
+@dataclass
+class RobotTrajectory:
+    """A retargeted trajectory and what the solver measured along it."""
+
+    hand: str
+    joint_names: list[str]
+    q: np.ndarray
+    """(T, nq) joint positions in MuJoCo ``qpos`` order; the first 6 are the floating wrist."""
+    timestamp: np.ndarray
+    """(T,) [s]."""
+    tip_sites: list[str]
+    tip_pos_world: np.ndarray
+    """(T, F, 3) robot fingertip sites [m]."""
+    keypoint_err: np.ndarray
+    """(T,) mean distance [m] between robot sites and their (scaled) human keypoint targets."""
+    min_distance: np.ndarray
+    """(T,) smallest signed hand–object distance [m] (negative: penetration); inf without object."""
+    contact_active: np.ndarray
+    """(T, F) bool: the human fingertip mapped to this robot finger touches the object."""
+    contact_err: np.ndarray
+    """(T, F) [m] robot fingertip distance to its contact target where active, NaN elsewhere."""
+    solve_time_s: float
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def num_frames(self) -> int:
+        return self.q.shape[0]
+
+    @property
+    def ms_per_frame(self) -> float:
+        return 1e3 * self.solve_time_s / max(self.num_frames, 1)
+
+    def save_npz(self, path) -> None:
+        """Write every array to one ``.npz`` (atomic: temp file + rename)."""
+        import json
+        import os
+        from pathlib import Path
+
+        path = Path(path)
+        tmp = path.with_name(f".{path.name}.tmp")
+        with open(tmp, "wb") as f:
+            np.savez_compressed(
+                f,
+                q=self.q,
+                timestamp=self.timestamp,
+                joint_names=np.array(self.joint_names),
+                tip_sites=np.array(self.tip_sites),
+                tip_pos_world=self.tip_pos_world,
+                keypoint_err=self.keypoint_err,
+                min_distance=self.min_distance,
+                contact_active=self.contact_active,
+                contact_err=self.contact_err,
+                meta=np.array(json.dumps({"hand": self.hand, **self.meta})),
+            )
+        os.replace(tmp, path)
+
+
+class Retargeter:
+    """Retarget human trajectories onto one robot hand (and optionally one object).
+
+    Args:
+        hand: a ``retarget.hands.HandModel`` (see ``retarget.hands.get_hand``).
+        geometry: the object's ``ObjectGeometry`` (``dexcanvas_core.demos.object_geometry``);
+            ``None`` retargets the hand alone (keypoint-only use).
+        config: weights and switches.
+    """
+
+    def __init__(self, hand, geometry=None, config: RetargetConfig | None = None):
+        self.hand = hand
+        self.geometry = geometry
+        self.cfg = (config or RetargetConfig()).validate()
+        self.scene: Scene = build_retarget_scene(hand, geometry)
+        m = self.scene.model
+        self.nq = self.scene.hand_nq
+        if self.cfg.backend == "pinocchio":
+            self.kin = PinocchioKinematics(m)
+        else:
+            self.kin = MujocoKinematics(m, self.scene.data, nq=self.nq)
+        self.keypoint_map = dict(hand.keypoint_map)
+        self.keypoint_map.pop("wrist", None)
+        self.kp_names = list(self.keypoint_map)
+        self.kp_index = np.array([MANO21.index(k) for k in self.kp_names])
+        self.kp_sites = [self.keypoint_map[k] for k in self.kp_names]
+        tip_human = [f for f in FINGERS if hand.fingers.get(f) is not None]
+        self.tip_human = tip_human
+        self.tip_index = np.array([MANO21.index(f"{f}_tip") for f in tip_human])
+        self.tip_sites = [f"{hand.fingers[f]}_tip_site" for f in tip_human]
+        self.scale = float(hand.scale)
+        c = self.cfg
+        is_tip = np.array([k.endswith("_tip") for k in self.kp_names])
+        self.keypoints = KeypointObjective(self.kp_sites, np.where(is_tip, c.w_tips, c.w_joints))
+        self.wrist = WristPoseObjective(hand_wrist_site(), (c.w_wrist_pos, c.w_wrist_rot))
+        thumb_site = self.tip_sites[0] if tip_human and tip_human[0] == "thumb" else None
+        pairs = [(s, thumb_site) for s in self.tip_sites[1:]] if thumb_site else []
+        # A gripper's two "fingers" both take several human fingers: no vectors among them.
+        pairs = [(a, b) for a, b in pairs if a != b]
+        self.vec_human = (
+            [(self.tip_index[i + 1], self.tip_index[0]) for i, (a, _) in enumerate(pairs)]
+            if pairs
+            else []
+        )
+        self.vectors = VectorObjective(pairs, c.w_vectors)
+        self.contacts = ContactObjective(self.tip_sites, c.w_contacts)
+        q0 = hand.default_qpos(m)[: self.nq]
+        self.q_default = q0
+        finger_mask = np.ones(self.nq, bool)
+        finger_mask[:6] = False
+        self.posture = PostureObjective(q0, c.w_posture, mask=finger_mask)
+        self.smooth = SmoothnessObjective(c.w_smooth)
+        lower = np.where(m.jnt_limited[: self.nq], m.jnt_range[: self.nq, 0], -np.inf)
+        upper = np.where(m.jnt_limited[: self.nq], m.jnt_range[: self.nq, 1], np.inf)
+        self.lower, self.upper = lower, upper
+        self.limits = [JointLimit(lower, upper, m.jnt_limited[: self.nq].astype(bool))]
+        coupling = CouplingLimit.from_mjmodel(m)
+        if coupling.rows:
+            self.limits.append(coupling)
+        self.collision = None
+        if geometry is not None and self.cfg.use_collision and self.scene.object_geoms:
+            pairs_geom = [(a, b) for a in self.scene.hand_geoms for b in self.scene.object_geoms]
+            self.collision = CollisionLimit(
+                m,
+                self.scene.data,
+                pairs_geom,
+                hand_nq=self.nq,
+                margin=c.penetration_margin,
+                distmax=c.collision_distmax,
+            )
+            self.limits.append(self.collision)
+        self._mink = None
+        if self.cfg.backend == "mink":
+            self._mink = _MinkSolver(self)
+
+    # ------------------------------------------------------------------ targets
+    def human_targets(self, traj: Trajectory) -> dict[str, np.ndarray]:
+        """Per-frame targets in world coordinates (see the module docstring)."""
+        h = traj.hand
+        if h.joint_pos is None:
+            from dexcanvas_core.mano import ManoLayer
+
+            layer = ManoLayer(h.name)
+            h_kp = layer.forward_numpy(
+                betas=h.betas[None], global_orient=h.global_rot_aa, hand_pose=h.finger_pose,
+                transl=h.global_pos,
+            ).keypoints  # fmt: skip
+        else:
+            h_kp = h.joint_pos.astype(np.float64)
+        if not np.all(np.isfinite(h_kp)):
+            raise RetargetError(f"trajectory {traj.uuid}: human keypoints contain NaN")
+        R_wrist = aa_to_matrix(h.global_rot_aa.astype(np.float64))
+        s = self.scale
+        if self.geometry is not None and traj.objects:
+            centre = traj.object.pos.astype(np.float64)
+        else:
+            centre = h_kp[:, 0]
+        wrist_p = centre + s * (h_kp[:, 0] - centre)
+        kp = centre[:, None] + s * (h_kp[:, self.kp_index] - centre[:, None])
+        vec = (
+            np.stack([s * (h_kp[:, a] - h_kp[:, b]) for a, b in self.vec_human], axis=1)
+            if self.vec_human
+            else np.zeros((traj.num_frames, 0, 3))
+        )
+        out = {"wrist_p": wrist_p, "wrist_R": R_wrist, "keypoints": kp, "vectors": vec}
+        T, F = traj.num_frames, len(self.tip_sites)
+        active = np.zeros((T, F), bool)
+        points = np.zeros((T, F, 3))
+        normals = np.zeros((T, F, 3))
+        if self.geometry is not None and traj.objects:
+            R_obj = aa_to_matrix(traj.object.rot_aa.astype(np.float64))
+            p_obj = traj.object.pos.astype(np.float64)
+            tips_world = h_kp[:, self.tip_index]  # (T, F, 3)
+            tips_obj = np.einsum("tji,tfj->tfi", R_obj, tips_world - p_obj[:, None])
+            sdf, n_obj = self.geometry.sdf_and_normal(tips_obj.reshape(-1, 3))
+            sdf = sdf.reshape(T, F)
+            n_obj = n_obj.reshape(T, F, 3)
+            surf_obj = tips_obj - sdf[..., None] * n_obj
+            points = np.einsum("tij,tfj->tfi", R_obj, surf_obj) + p_obj[:, None]
+            normals = np.einsum("tij,tfj->tfi", R_obj, n_obj)
+            if traj.contacts is not None:
+                active = self._active_from_records(traj)
+            else:
+                active = sdf < self.cfg.contact_threshold
+        out.update(contact_active=active, contact_points=points, contact_normals=normals)
+        return out
+
+    def _active_from_records(self, traj: Trajectory) -> np.ndarray:
+        """Fingertip contact per frame from the force pipeline's part records (distal parts)."""
+        T, F = traj.num_frames, len(self.tip_sites)
+        active = np.zeros((T, F), bool)
+        distal = {"thumb_ip": "thumb", **{f"{f}_dip": f for f in FINGERS[1:]}}
+        c = traj.contacts
+        for frame, part in zip(c.frame, c.joint_name, strict=True):
+            finger = distal.get(part)
+            if finger in self.tip_human:
+                active[frame, self.tip_human.index(finger)] = True
+        return active
+
+    # ------------------------------------------------------------------ solving
+    def retarget(
+        self, traj: Trajectory, progress: Callable[[int, int], None] | None = None
+    ) -> RobotTrajectory:
+        """Retarget every frame of ``traj``; ``progress(done, total)`` is called per frame."""
+        traj.validate()
+        tg = self.human_targets(traj)
+        T, F = traj.num_frames, len(self.tip_sites)
+        q = self.q_default.copy()
+        from retarget.hands.base import wrist_qpos_from_mano
+
+        q[:6] = wrist_qpos_from_mano(tg["wrist_R"][0], tg["wrist_p"][0])
+        Q = np.zeros((T, self.nq))
+        tips = np.zeros((T, F, 3))
+        kp_err = np.zeros(T)
+        min_d = np.full(T, np.inf)
+        c_err = np.full((T, F), np.nan)
+        has_obj = self.geometry is not None and bool(traj.objects)
+        t0 = time.perf_counter()
+        self.smooth.set_previous(None)
+        for t in range(T):
+            if has_obj:
+                self.scene.set_object_pose(traj.object.pos[t], traj.object.rot_aa[t])
+            self.wrist.set_target(tg["wrist_p"][t], tg["wrist_R"][t])
+            self.keypoints.set_targets(tg["keypoints"][t])
+            if self.vec_human:
+                self.vectors.set_targets(tg["vectors"][t])
+            active = tg["contact_active"][t] & self.cfg.use_contacts
+            self.contacts.set_contacts(active, tg["contact_points"][t], tg["contact_normals"][t])
+            n_it = self.cfg.first_frame_iterations if t == 0 else self.cfg.iterations
+            q = self._solve_frame(q, n_it, traj.timestamp, t)
+            self.smooth.set_previous(q)
+            Q[t] = q
+            self.kin.forward(q)
+            tips[t] = [self.kin.site_position(s) for s in self.tip_sites]
+            robot_kp = np.stack([self.kin.site_position(s) for s in self.kp_sites])
+            kp_err[t] = float(np.mean(np.linalg.norm(robot_kp - tg["keypoints"][t], axis=1)))
+            if self.collision is not None:
+                d = self.collision.distances(q)
+                min_d[t] = min((x[2] for x in d), default=np.inf)
+            for f in np.flatnonzero(tg["contact_active"][t]):
+                c_err[t, f] = np.linalg.norm(tips[t, f] - tg["contact_points"][t, f])
+            if progress is not None:
+                progress(t + 1, T)
+        elapsed = time.perf_counter() - t0
+        return RobotTrajectory(
+            hand=self.hand.name,
+            joint_names=[
+                mujoco.mj_id2name(self.scene.model, mujoco.mjtObj.mjOBJ_JOINT, j)
+                for j in range(self.nq)
+            ],
+            q=Q,
+            timestamp=traj.timestamp.copy(),
+            tip_sites=list(self.tip_sites),
+            tip_pos_world=tips,
+            keypoint_err=kp_err,
+            min_distance=min_d,
+            contact_active=tg["contact_active"].copy(),
+            contact_err=c_err,
+            solve_time_s=elapsed,
+            meta={
+                "backend": self.cfg.backend,
+                "uuid": traj.uuid,
+                "scale": self.scale,
+                "config": {k: v for k, v in self.cfg.__dict__.items()},
+            },
+        )
+
+    def _objectives(self):
+        objs = [self.wrist, self.keypoints, self.posture, self.smooth]
+        if self.vec_human:
+            objs.append(self.vectors)
+        if self.cfg.use_contacts:
+            objs.append(self.contacts)
+        return objs
+
+    def _solve_frame(
+        self, q: np.ndarray, iterations: int, timestamp: np.ndarray, t: int
+    ) -> np.ndarray:
+        dt = float(timestamp[t] - timestamp[t - 1]) if t > 0 else 1.0 / 30.0
+        if self._mink is not None:
+            return self._mink.solve(q, iterations)
+        vel = VelocityLimit(self.cfg.max_joint_speed)
+        limits = [*self.limits, vel] if t > 0 else self.limits
+        for _ in range(iterations):
+            self.kin.forward(q)
+            state = RobotState(q=q, kin=self.kin, dt=dt)
+            dq = solve_qp(
+                build_qp(state, self._objectives(), limits, self.cfg.damping), self.cfg.solver
+            )
+            q = q + dq
+        return q
+
+
+def hand_wrist_site() -> str:
+    from retarget.hands.base import WRIST_SITE
+
+    return WRIST_SITE
+
+
+class _MinkSolver:
+    """The mink backend: our objectives as mink tasks, mink's limits, ``mink.solve_ik``."""
+
+    def __init__(self, rt: Retargeter):
+        import mink
+
+        self.rt = rt
+        m = rt.scene.model
+        self.configuration = mink.Configuration(m)
+        # One MjData for mink, our kinematics and the collision queries: the object pose set
+        # on the scene is the one mink's collision limit sees.
+        self.configuration.data = rt.scene.data
+        self.kin = rt.kin
+        self.limits = [mink.ConfigurationLimit(m, gain=1.0)]
+        if rt.collision is not None:
+            hand = [m.geom(g).name for g in rt.scene.hand_geoms]
+            obj = [m.geom(g).name for g in rt.scene.object_geoms]
+            self.limits.append(
+                mink.CollisionAvoidanceLimit(
+                    m,
+                    geom_pairs=[(hand, obj)],
+                    gain=1.0,
+                    minimum_distance_from_collisions=-rt.cfg.penetration_margin,
+                    collision_detection_distance=rt.cfg.collision_distmax,
+                )
+            )
+        self.constraints = [mink.EqualityConstraintTask(m, cost=1.0)] if m.neq else []
+
+    def _task(self, objective):
+        import mink
+
+        kin = self.kin
+
+        class _Task(mink.Task):
+            def __init__(self):
+                super().__init__(cost=np.ones(1))
+
+            def _state(self, configuration):
+                return RobotState(q=configuration.q.copy(), kin=kin)
+
+            def compute_error(self, configuration):
+                return objective.error(self._state(configuration))
+
+            def compute_jacobian(self, configuration):
+                return objective.jacobian(self._state(configuration))
+
+            def compute_qp_objective(self, configuration):
+                H, c = objective.qp_terms(self._state(configuration))
+                return mink.Objective(H, c)
+
+        return _Task()
+
+    def solve(self, q: np.ndarray, iterations: int) -> np.ndarray:
+        import mink
+
+        conf = self.configuration
+        conf.update(q)
+        tasks = [self._task(o) for o in self.rt._objectives()]
+        for _ in range(iterations):
+            v = mink.solve_ik(
+                conf, tasks, dt=1.0, solver=self.rt.cfg.solver, damping=self.rt.cfg.damping,
+                limits=self.limits, constraints=self.constraints or None,
+            )  # fmt: skip
+            conf.integrate_inplace(v, 1.0)
+        return conf.q.copy()
