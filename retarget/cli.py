@@ -1,15 +1,116 @@
 """``retarget``: the command line of the robot side.
 
-Sub-commands arrive with the robot-hand registry and the retargeting solver; until then the
-entry point reports the version and which sub-commands exist.
+A thin layer: each sub-command parses into a frozen config dataclass and calls one ``run_*``
+function that library users can call too. Sub-commands are entries of ``COMMANDS``: a new one
+(``run``, ``validate``, …) adds its config, its ``run_*`` function and one ``Command`` entry.
+Errors of the toolkit are printed as one line, ``retarget <command>: error: <message>``, and give
+exit code 2.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import logging
 import sys
+from collections.abc import Callable
+from dataclasses import dataclass
 
 from retarget import __version__
+from retarget.errors import RetargetError
+
+# ---------------------------------------------------------------------------- retarget hands
+
+
+@dataclass(frozen=True)
+class HandsConfig:
+    """``retarget hands``: list the registered robot hands."""
+
+    as_json: bool = False
+    """Print a JSON list (one object per hand) instead of a table."""
+
+
+def _fingers_cell(fingers: dict) -> str:
+    return ",".join(r or "–" for r in fingers.values())
+
+
+def run_hands(cfg: HandsConfig) -> list[dict]:
+    """Print every registered hand with its DoF, actuators, finger mapping and model source.
+
+    Returns the rows (``retarget.hands.hands_table()``).
+    """
+    from retarget.hands import hands_table
+
+    rows = hands_table()
+    if cfg.as_json:
+        print(json.dumps(rows, indent=2, sort_keys=True))
+        return rows
+    from rich import box
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title="robot hands (--hand NAME)", box=box.SIMPLE_HEAD)
+    t.add_column("hand", style="bold")
+    t.add_column("DoF", justify="right")
+    t.add_column("act.", justify="right")
+    t.add_column("coupl.", justify="right")
+    t.add_column("thumb,index,middle,ring,pinky →", no_wrap=True)
+    t.add_column("scale", justify="right")
+    t.add_column("source", no_wrap=True)
+    t.add_column("licence")
+    for r in rows:
+        t.add_row(
+            r["name"],
+            f"{r['dof_wrist']}+{r['dof_fingers']}",
+            f"{r['dof_wrist']}+{r['actuators_fingers']}",
+            str(r["couplings"]),
+            _fingers_cell(r["fingers"]),
+            f"{r['scale']:.2f}",
+            r["source"],
+            r["licence"],
+        )
+    con = Console()
+    if not con.is_terminal:  # piped: do not squeeze the table into 80 columns
+        con = Console(width=120)
+    con.print(t)
+    con.print(
+        "DoF, act.: 6 floating-wrist + the hand's joints / actuators; coupl.: tendon and "
+        "equality couplings;\nfingers: the robot finger each human finger drives (– dropped); "
+        "scale: robot/human hand size"
+    )
+    return rows
+
+
+def _add_hands_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+
+
+def _hands_config(args: argparse.Namespace) -> HandsConfig:
+    return HandsConfig(as_json=args.json)
+
+
+# ---------------------------------------------------------------------------- command table
+
+
+@dataclass(frozen=True)
+class Command:
+    """One sub-command: its help, its arguments, how they become a config, what runs it."""
+
+    help: str
+    add_arguments: Callable[[argparse.ArgumentParser], None]
+    make_config: Callable[[argparse.Namespace], object]
+    run: Callable[[object], object]
+    exit_code: Callable[[object], int] = lambda result: 0
+
+
+COMMANDS: dict[str, Command] = {
+    "hands": Command(
+        help="list the robot hands: DoF, actuators, finger mapping, model source",
+        add_arguments=_add_hands_args,
+        make_config=_hands_config,
+        run=run_hands,
+    ),
+}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -18,7 +119,10 @@ def build_parser() -> argparse.ArgumentParser:
         description="Retarget DexCanvas human demonstrations onto robot hands.",
     )
     p.add_argument("--version", action="version", version=f"dexcanvas-retarget {__version__}")
-    p.add_subparsers(dest="command", metavar="COMMAND")
+    p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    for name, cmd in COMMANDS.items():
+        cmd.add_arguments(sub.add_parser(name, help=cmd.help, description=cmd.help))
     return p
 
 
@@ -28,7 +132,16 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 0
-    return 0
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(message)s"
+    )
+    cmd = COMMANDS[args.command]
+    try:
+        result = cmd.run(cmd.make_config(args))
+    except RetargetError as e:
+        print(f"retarget {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    return cmd.exit_code(result)
 
 
 if __name__ == "__main__":
