@@ -39,10 +39,10 @@ from retarget.errors import RetargetError
 from retarget.kinematics import MujocoKinematics, PinocchioKinematics
 from retarget.limits import CollisionLimit, CouplingLimit, JointLimit, VelocityLimit
 from retarget.objectives import (
-    ContactObjective,
     KeypointObjective,
     PostureObjective,
     SmoothnessObjective,
+    SurfaceContactObjective,
     VectorObjective,
     WristPoseObjective,
 )
@@ -118,7 +118,8 @@ class RobotTrajectory:
     contact_active: np.ndarray
     """(T, F) bool: the human fingertip mapped to this robot finger touches the object."""
     contact_err: np.ndarray
-    """(T, F) [m] robot fingertip distance to its contact target where active, NaN elsewhere."""
+    """(T, F) [m] where active: distance from the robot finger's surface point nearest the object
+    to the human's contact point; NaN elsewhere."""
     solve_time_s: float
     meta: dict = field(default_factory=dict)
 
@@ -200,7 +201,18 @@ class Retargeter:
             else []
         )
         self.vectors = VectorObjective(pairs, c.w_vectors)
-        self.contacts = ContactObjective(self.tip_sites, c.w_contacts)
+        self.contacts = None
+        if geometry is not None:
+            finger_geoms = []
+            for site in self.tip_sites:
+                body = m.site_bodyid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, site)]
+                geoms = [g for g in self.scene.hand_geoms if m.geom_bodyid[g] == body]
+                if not geoms:
+                    raise RetargetError(f"hand {hand.name!r}: no collision geom on {site}'s link")
+                finger_geoms.append(geoms)
+            self.contacts = SurfaceContactObjective(
+                m, self.scene.data, finger_geoms, self.scene.object_geoms, self.nq, c.w_contacts
+            )
         q0 = hand.default_qpos(m)[: self.nq]
         self.q_default = q0
         finger_mask = np.ones(self.nq, bool)
@@ -272,7 +284,7 @@ class Retargeter:
             sdf, n_obj = self.geometry.sdf_and_normal(tips_obj.reshape(-1, 3))
             sdf = sdf.reshape(T, F)
             n_obj = n_obj.reshape(T, F, 3)
-            surf_obj = tips_obj - sdf[..., None] * n_obj
+            surf_obj = tips_obj - sdf[..., None] * n_obj  # surface point under the fingertip
             points = np.einsum("tij,tfj->tfi", R_obj, surf_obj) + p_obj[:, None]
             normals = np.einsum("tij,tfj->tfi", R_obj, n_obj)
             if traj.contacts is not None:
@@ -321,8 +333,9 @@ class Retargeter:
             self.keypoints.set_targets(tg["keypoints"][t])
             if self.vec_human:
                 self.vectors.set_targets(tg["vectors"][t])
-            active = tg["contact_active"][t] & self.cfg.use_contacts
-            self.contacts.set_contacts(active, tg["contact_points"][t], tg["contact_normals"][t])
+            if self.contacts is not None:
+                active = tg["contact_active"][t] & self.cfg.use_contacts
+                self.contacts.set_contacts(active, tg["contact_points"][t])
             n_it = self.cfg.first_frame_iterations if t == 0 else self.cfg.iterations
             q = self._solve_frame(q, n_it, traj.timestamp, t)
             self.smooth.set_previous(q)
@@ -334,8 +347,11 @@ class Retargeter:
             if self.collision is not None:
                 d = self.collision.distances(q)
                 min_d[t] = min((x[2] for x in d), default=np.inf)
-            for f in np.flatnonzero(tg["contact_active"][t]):
-                c_err[t, f] = np.linalg.norm(tips[t, f] - tg["contact_points"][t, f])
+            if self.contacts is not None and tg["contact_active"][t].any():
+                self.contacts.set_contacts(tg["contact_active"][t], tg["contact_points"][t])
+                d_c = self.contacts.distances_to_targets(q)
+                act = tg["contact_active"][t]
+                c_err[t, act] = d_c[act]
             if progress is not None:
                 progress(t + 1, T)
         elapsed = time.perf_counter() - t0
@@ -366,7 +382,7 @@ class Retargeter:
         objs = [self.wrist, self.keypoints, self.posture, self.smooth]
         if self.vec_human:
             objs.append(self.vectors)
-        if self.cfg.use_contacts:
+        if self.cfg.use_contacts and self.contacts is not None:
             objs.append(self.contacts)
         return objs
 

@@ -1,7 +1,7 @@
 """QP objectives: each a residual and its Jacobian (see ``base.Objective``)."""
 
 from retarget.objectives.base import Objective
-from retarget.objectives.contacts import ContactObjective
+from retarget.objectives.contacts import ContactObjective, SurfaceContactObjective
 from retarget.objectives.keypoints import KeypointObjective, VectorObjective
 from retarget.objectives.regularization import PostureObjective, SmoothnessObjective
 from retarget.objectives.wrist import WristPoseObjective
@@ -12,6 +12,7 @@ __all__ = [
     "Objective",
     "PostureObjective",
     "SmoothnessObjective",
+    "SurfaceContactObjective",
     "VectorObjective",
     "WristPoseObjective",
 ]

@@ -82,3 +82,91 @@ class ContactObjective(Objective):
                 v = state.kin.site_rotation(self.sites[i]) @ self.pad_axis
                 out.append(-_skew(v) @ J[3:])  # d(R a)/dt = ω × (R a)
         return np.concatenate(out, axis=0) if out else np.zeros((0, state.nv))
+
+
+class SurfaceContactObjective(Objective):
+    """Active contacts: the robot finger's surface point nearest the object goes to the target.
+
+    For each robot finger with an active contact, MuJoCo's ``mj_geomDistance`` between the
+    finger's distal collision geoms and the object gives the finger surface point ``p_f`` closest
+    to the object; ``e = p_f − p_target`` with ``p_f`` treated as fixed to its body for the
+    Jacobian. Unlike a site-based target this does not depend on where a hand model puts its
+    fingertip site: whatever part of the distal link meets the object, meets it at the human's
+    contact point. ``pad_axis`` normal matching is not used here.
+
+    Args:
+        model, data: the retargeting scene; ``data.qpos[:hand_nq]`` is synchronised with ``q``.
+        finger_geoms: per robot finger, its distal link's collision geom ids.
+        object_geoms: the object's geom ids.
+    """
+
+    name = "contacts"
+
+    def __init__(self, model, data, finger_geoms, object_geoms, hand_nq: int, weight: float = 1.0):
+        super().__init__(weight)
+        import mujoco
+
+        self._mj = mujoco
+        self.model, self.data = model, data
+        self.finger_geoms = [list(g) for g in finger_geoms]
+        self.object_geoms = list(object_geoms)
+        self.hand_nq = hand_nq
+        F = len(self.finger_geoms)
+        self.active = np.zeros(F, bool)
+        self.points = np.zeros((F, 3))
+        self._cache_q: np.ndarray | None = None
+        self._cache: list[tuple[str, np.ndarray]] = []
+        self._bodies = [
+            mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(model.nbody)
+        ]
+
+    def set_contacts(self, active: np.ndarray, points_world: np.ndarray) -> None:
+        a = np.asarray(active, bool)
+        p = np.asarray(points_world, dtype=np.float64)
+        F = len(self.finger_geoms)
+        if a.shape != (F,) or p.shape != (F, 3):
+            raise RetargetError(f"contacts: expected ({F},), ({F}, 3); got {a.shape}, {p.shape}")
+        if not np.isfinite(p[a]).all():
+            raise RetargetError("contacts: active contact points contain NaN")
+        self.active, self.points = a, p
+        self._cache_q = None
+
+    def finger_points(self, q: np.ndarray) -> list[tuple[str, np.ndarray]]:
+        """Per finger: (body name, surface point [m] of the finger nearest the object)."""
+        if self._cache_q is not None and np.array_equal(q, self._cache_q):
+            return self._cache
+        mj = self._mj
+        self.data.qpos[: self.hand_nq] = q
+        mj.mj_kinematics(self.model, self.data)
+        fromto = np.zeros(6)
+        out = []
+        for geoms in self.finger_geoms:
+            best, best_p, best_b = np.inf, np.zeros(3), ""
+            for g in geoms:
+                for o in self.object_geoms:
+                    d = mj.mj_geomDistance(self.model, self.data, g, o, 1.0, fromto)
+                    if d < best:
+                        best, best_p = d, fromto[:3].copy()
+                        best_b = self._bodies[self.model.geom_bodyid[g]]
+            out.append((best_b, best_p))
+        self._cache_q, self._cache = q.copy(), out
+        return out
+
+    def distances_to_targets(self, q: np.ndarray) -> np.ndarray:
+        """(F,) [m] distance from each finger's nearest surface point to its target."""
+        pts = self.finger_points(q)
+        return np.array([np.linalg.norm(p - t) for (_, p), t in zip(pts, self.points, strict=True)])
+
+    def error(self, state: RobotState) -> np.ndarray:
+        if not self.active.any():
+            return np.zeros(0)
+        pts = self.finger_points(state.q)
+        return np.concatenate([pts[i][1] - self.points[i] for i in np.flatnonzero(self.active)])
+
+    def jacobian(self, state: RobotState) -> np.ndarray:
+        if not self.active.any():
+            return np.zeros((0, state.nv))
+        pts = self.finger_points(state.q)
+        return np.concatenate(
+            [state.kin.point_jacobian(*pts[i]) for i in np.flatnonzero(self.active)], axis=0
+        )
