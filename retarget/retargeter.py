@@ -86,6 +86,11 @@ class RetargetConfig:
     """Human fingertip–surface distance [m] below which a fingertip is in contact (inferred)."""
     max_joint_speed: float = 20.0
     """Velocity bound [rad/s or m/s] per joint."""
+    squeeze_depth: float = 0.004
+    """Grip: where the human touches the object, the robot's position *command* (``q_command``)
+    presses each contacting finger this far [m] into the surface (along the surface normal,
+    finger joints only), so that position servos produce a grip force. The kinematic solution
+    ``q`` itself stays outside the object. 0 disables it."""
 
     def validate(self) -> RetargetConfig:
         if self.backend not in ("pinocchio", "mink"):
@@ -106,6 +111,8 @@ class RobotTrajectory:
     joint_names: list[str]
     q: np.ndarray
     """(T, nq) joint positions in MuJoCo ``qpos`` order; the first 6 are the floating wrist."""
+    q_command: np.ndarray
+    """(T, nq) position-servo targets: ``q`` plus the grip squeeze on contact frames."""
     timestamp: np.ndarray
     """(T,) [s]."""
     tip_sites: list[str]
@@ -143,6 +150,7 @@ class RobotTrajectory:
             np.savez_compressed(
                 f,
                 q=self.q,
+                q_command=self.q_command,
                 timestamp=self.timestamp,
                 joint_names=np.array(self.joint_names),
                 tip_sites=np.array(self.tip_sites),
@@ -319,6 +327,7 @@ class Retargeter:
 
         q[:6] = wrist_qpos_from_mano(tg["wrist_R"][0], tg["wrist_p"][0])
         Q = np.zeros((T, self.nq))
+        Qc = np.zeros((T, self.nq))
         tips = np.zeros((T, F, 3))
         kp_err = np.zeros(T)
         min_d = np.full(T, np.inf)
@@ -340,6 +349,7 @@ class Retargeter:
             q = self._solve_frame(q, n_it, traj.timestamp, t)
             self.smooth.set_previous(q)
             Q[t] = q
+            Qc[t] = q + self._squeeze(q, tg["contact_active"][t], tg["contact_normals"][t])
             self.kin.forward(q)
             tips[t] = [self.kin.site_position(s) for s in self.tip_sites]
             robot_kp = np.stack([self.kin.site_position(s) for s in self.kp_sites])
@@ -362,6 +372,7 @@ class Retargeter:
                 for j in range(self.nq)
             ],
             q=Q,
+            q_command=Qc,
             timestamp=traj.timestamp.copy(),
             tip_sites=list(self.tip_sites),
             tip_pos_world=tips,
@@ -377,6 +388,24 @@ class Retargeter:
                 "config": {k: v for k, v in self.cfg.__dict__.items()},
             },
         )
+
+    def _squeeze(self, q: np.ndarray, active: np.ndarray, normals: np.ndarray) -> np.ndarray:
+        """Joint offset pressing each contacting finger ``squeeze_depth`` into the surface.
+
+        ``Δq = Jᵀ (J Jᵀ + λ I)⁻¹ δ`` with ``δ = −depth · n`` per active contact and ``J`` the
+        contact points' Jacobians restricted to the finger joints (the wrist does not move).
+        """
+        dq = np.zeros(self.nq)
+        if self.contacts is None or self.cfg.squeeze_depth <= 0 or not active.any():
+            return dq
+        self.kin.forward(q)
+        pts = self.contacts.finger_points(q)
+        idx = np.flatnonzero(active)
+        J = np.concatenate([self.kin.point_jacobian(*pts[i]) for i in idx], axis=0)
+        J[:, :6] = 0.0
+        delta = np.concatenate([-self.cfg.squeeze_depth * normals[i] for i in idx])
+        dq = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(J.shape[0]), delta)
+        return np.clip(q + dq, self.lower, self.upper) - q
 
     def _objectives(self):
         objs = [self.wrist, self.keypoints, self.posture, self.smooth]

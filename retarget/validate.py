@@ -1,0 +1,246 @@
+"""Re-simulation: does the retargeted robot hand really move the object like the human did?
+
+The robot hand (its own position actuators, plus the 6-DoF actuated wrist) tracks the retargeted
+joint trajectory in MuJoCo; the object is a free body on a table, starting at the human's first
+object pose. Success is the DexCanvas rule: no frame with object position error above 5 cm. The
+loose rule of other work (mean error < 10 cm and < 0.5 rad) is reported too, with mean errors,
+per-finger contact forces and the deepest hand–object penetration.
+
+Contact forces come from ``mj_contactForce`` after each physics step (the contacts and the
+constraint forces of one ``mj_step`` belong to the same forward pass), rotated out of the contact
+frame into the world, signed as the force of the hand on the object, and averaged over the
+physics steps of each data frame.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from dexcanvas_core.rotations import aa_to_quat_wxyz, quat_wxyz_to_aa, rotation_angle_between_aa
+from dexcanvas_core.trajectory import Trajectory
+from retarget.errors import RetargetError
+from retarget.scene import OBJECT_BODY, TABLE_GEOM, add_object
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ValidateConfig:
+    """Re-simulation settings."""
+
+    success_threshold_m: float = 0.05
+    """DexCanvas rule: a frame with object position error above this fails the rollout [m]."""
+    loose_pos_m: float = 0.10
+    """Loose rule: mean position error below this [m] ..."""
+    loose_rot_rad: float = 0.5
+    """... and mean rotation error below this [rad]."""
+    settle_s: float = 0.3
+    """Time [s] the scene settles at the first frame (object resting, hand holding) first."""
+    table: bool = True
+    """Put a table (z = 0 plane) under the object."""
+
+
+@dataclass
+class ValidationResult:
+    """What the re-simulation measured (arrays are per data frame)."""
+
+    success: bool
+    success_loose: bool
+    object_pos_err: np.ndarray
+    """(T,) [m]."""
+    object_rot_err: np.ndarray
+    """(T,) [rad]."""
+    object_pos_sim: np.ndarray
+    """(T, 3) [m] simulated object position."""
+    object_rot_sim: np.ndarray
+    """(T, 3) [rad] simulated object orientation (axis-angle)."""
+    finger_force_world: np.ndarray
+    """(T, F + 1, 3) [N]: force of each robot finger (``fingers`` order) and the palm on the
+    object, world frame, averaged over the physics steps of the frame."""
+    fingers: list[str]
+    penetration_max_m: float
+    """Deepest hand–object penetration seen [m] (0 if none)."""
+    first_failure_frame: int | None
+    timestep: float
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def object_pos_err_max_m(self) -> float:
+        return float(self.object_pos_err.max())
+
+    @property
+    def object_pos_err_mean_m(self) -> float:
+        return float(self.object_pos_err.mean())
+
+    @property
+    def object_rot_err_mean_rad(self) -> float:
+        return float(self.object_rot_err.mean())
+
+    def metrics(self) -> dict:
+        return {
+            "success": bool(self.success),
+            "success_loose": bool(self.success_loose),
+            "object_pos_err_max_m": self.object_pos_err_max_m,
+            "object_pos_err_mean_m": self.object_pos_err_mean_m,
+            "object_rot_err_mean_rad": self.object_rot_err_mean_rad,
+            "penetration_max_m": float(self.penetration_max_m),
+            "first_failure_frame": self.first_failure_frame,
+            "finger_force_mean_n": {
+                f: float(np.linalg.norm(self.finger_force_world[:, i], axis=1).mean())
+                for i, f in enumerate([*self.fingers, "palm"])
+            },
+        }
+
+
+def build_sim_scene(hand, geometry, *, table: bool = True) -> mujoco.MjModel:
+    """Hand with its actuators + the object as a free body (+ a table plane at z = 0)."""
+    spec = hand.build_spec()
+    if table:
+        g = spec.worldbody.add_geom(
+            name=TABLE_GEOM,
+            type=mujoco.mjtGeom.mjGEOM_PLANE,
+            size=[1.0, 1.0, 0.01],
+            rgba=[0.6, 0.6, 0.6, 1.0],
+        )
+        g.contype = 1
+        g.conaffinity = 1
+        g.condim = 3
+    add_object(spec, geometry, mocap=False)
+    return spec.compile()
+
+
+class Resimulator:
+    """Re-simulate retargeted trajectories of one hand with one object."""
+
+    def __init__(self, hand, geometry, config: ValidateConfig | None = None):
+        self.hand = hand
+        self.geometry = geometry
+        self.cfg = config or ValidateConfig()
+        self.model = build_sim_scene(hand, geometry, table=self.cfg.table)
+        m = self.model
+        self.object_body = m.body(OBJECT_BODY).id
+        jnt = m.body_jntadr[self.object_body]
+        self.obj_qadr = int(m.jnt_qposadr[jnt])
+        self.obj_vadr = int(m.jnt_dofadr[jnt])
+        self.hand_nq = self.obj_qadr  # the hand's joints come first, the object's free joint last
+        # Actuator → hand qpos index of the joint it drives.
+        self.act_q = np.array([m.jnt_qposadr[m.actuator_trnid[a, 0]] for a in range(m.nu)])
+        parts = hand.hand_parts(m)
+        self.fingers = [f for f in hand.robot_fingers]
+        body_part = np.full(m.nbody, -1)
+        for i, f in enumerate([*self.fingers, "palm"]):
+            for bname in parts.get(f, []):
+                body_part[m.body(bname).id] = i
+        self.body_part = body_part
+
+    def run(
+        self,
+        q: np.ndarray,
+        human: Trajectory,
+        progress: Callable[[int, int], None] | None = None,
+    ) -> ValidationResult:
+        """Track ``q`` (T, hand_nq) at the human trajectory's timestamps; see the module docstring."""
+        m = self.model
+        q = np.asarray(q, dtype=np.float64)
+        T = human.num_frames
+        if q.shape != (T, self.hand_nq):
+            raise RetargetError(
+                f"joint trajectory has shape {q.shape}, expected ({T}, {self.hand_nq})"
+            )
+        if not np.all(np.isfinite(q)):
+            raise RetargetError("joint trajectory contains NaN or inf")
+        d = mujoco.MjData(m)
+        p_obj = human.object.pos.astype(np.float64)
+        r_obj = human.object.rot_aa.astype(np.float64)
+        d.qpos[: self.hand_nq] = q[0]
+        d.qpos[self.obj_qadr : self.obj_qadr + 3] = p_obj[0]
+        d.qpos[self.obj_qadr + 3 : self.obj_qadr + 7] = aa_to_quat_wxyz(r_obj[0])
+        d.ctrl[:] = q[0][self.act_q]
+        mujoco.mj_forward(m, d)
+        for _ in range(int(round(self.cfg.settle_s / m.opt.timestep))):
+            mujoco.mj_step(m, d)
+        F = len(self.fingers) + 1
+        forces = np.zeros((T, F, 3))
+        pos_sim = np.zeros((T, 3))
+        rot_sim = np.zeros((T, 3))
+        pen = 0.0
+        ts = human.timestamp
+        for t in range(T):
+            dt = (ts[t] - ts[t - 1]) if t > 0 else 0.0
+            n_sub = max(int(round(dt / m.opt.timestep)), 0 if t == 0 else 1)
+            acc = np.zeros((F, 3))
+            n_read = 0
+            for k in range(n_sub):
+                a = (k + 1) / n_sub
+                d.ctrl[:] = ((1 - a) * q[t - 1] + a * q[t])[self.act_q]
+                mujoco.mj_step(m, d)
+                f, p = self._contact_forces(d)
+                acc += f
+                pen = max(pen, p)
+                n_read += 1
+            if n_read == 0:
+                mujoco.mj_forward(m, d)
+                f, p = self._contact_forces(d)
+                acc, n_read, pen = f, 1, max(pen, p)
+            forces[t] = acc / n_read
+            pos_sim[t] = d.qpos[self.obj_qadr : self.obj_qadr + 3]
+            rot_sim[t] = quat_wxyz_to_aa(d.qpos[self.obj_qadr + 3 : self.obj_qadr + 7])
+            if progress is not None:
+                progress(t + 1, T)
+            if not np.all(np.isfinite(d.qpos)):
+                raise RetargetError(f"simulation diverged at frame {t} (non-finite state)")
+        pos_err = np.linalg.norm(pos_sim - p_obj, axis=1)
+        rot_err = rotation_angle_between_aa(rot_sim, r_obj)
+        over = np.flatnonzero(pos_err > self.cfg.success_threshold_m)
+        return ValidationResult(
+            success=over.size == 0,
+            success_loose=bool(
+                pos_err.mean() < self.cfg.loose_pos_m and rot_err.mean() < self.cfg.loose_rot_rad
+            ),
+            object_pos_err=pos_err,
+            object_rot_err=rot_err,
+            object_pos_sim=pos_sim,
+            object_rot_sim=rot_sim,
+            finger_force_world=forces,
+            fingers=list(self.fingers),
+            penetration_max_m=pen,
+            first_failure_frame=int(over[0]) if over.size else None,
+            timestep=float(m.opt.timestep),
+            meta={
+                "integrator": "implicitfast",
+                "cone": "elliptic",
+                "impratio": float(m.opt.impratio),
+                "timestep": float(m.opt.timestep),
+            },
+        )
+
+    def _contact_forces(self, d: mujoco.MjData) -> tuple[np.ndarray, float]:
+        """(F+1, 3) hand-part forces on the object [N] and the deepest penetration [m]."""
+        m = self.model
+        out = np.zeros((len(self.fingers) + 1, 3))
+        pen = 0.0
+        f6 = np.zeros(6)
+        for i in range(d.ncon):
+            c = d.contact[i]
+            b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
+            # mj_contactForce's force acts on geom2 (DESIGN.md): it is the force on the object
+            # when the object is geom2, and minus it when the object is geom1.
+            if b1 == self.object_body:
+                hand_body, on_object = b2, -1.0
+            elif b2 == self.object_body:
+                hand_body, on_object = b1, 1.0
+            else:
+                continue
+            part = self.body_part[hand_body]
+            if part < 0:
+                continue  # the table
+            mujoco.mj_contactForce(m, d, i, f6)
+            frame = np.asarray(c.frame).reshape(3, 3)  # rows: normal, tangent 1, tangent 2
+            out[part] += on_object * (frame.T @ f6[:3])  # contact frame → world
+            pen = max(pen, -float(c.dist))
+        return out, pen
