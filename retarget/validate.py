@@ -144,7 +144,7 @@ class Resimulator:
         human: Trajectory,
         progress: Callable[[int, int], None] | None = None,
     ) -> ValidationResult:
-        """Track ``q`` (T, hand_nq) at the human trajectory's timestamps; see the module docstring."""
+        """Track ``q`` (T, hand_nq) at the human trajectory's timestamps (module docstring)."""
         m = self.model
         q = np.asarray(q, dtype=np.float64)
         T = human.num_frames
@@ -162,7 +162,7 @@ class Resimulator:
         d.qpos[self.obj_qadr + 3 : self.obj_qadr + 7] = aa_to_quat_wxyz(r_obj[0])
         d.ctrl[:] = q[0][self.act_q]
         mujoco.mj_forward(m, d)
-        for _ in range(int(round(self.cfg.settle_s / m.opt.timestep))):
+        for _ in range(round(self.cfg.settle_s / m.opt.timestep)):
             mujoco.mj_step(m, d)
         F = len(self.fingers) + 1
         forces = np.zeros((T, F, 3))
@@ -172,7 +172,7 @@ class Resimulator:
         ts = human.timestamp
         for t in range(T):
             dt = (ts[t] - ts[t - 1]) if t > 0 else 0.0
-            n_sub = max(int(round(dt / m.opt.timestep)), 0 if t == 0 else 1)
+            n_sub = max(round(dt / m.opt.timestep), 0 if t == 0 else 1)
             acc = np.zeros((F, 3))
             n_read = 0
             for k in range(n_sub):
