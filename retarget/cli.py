@@ -15,7 +15,9 @@ import logging
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
+from dexcanvas_core.errors import DexCanvasError
 from retarget import __version__
 from retarget.errors import RetargetError
 
@@ -89,6 +91,49 @@ def _hands_config(args: argparse.Namespace) -> HandsConfig:
     return HandsConfig(as_json=args.json)
 
 
+# ---------------------------------------------------------------------------- retarget run
+
+
+def _add_run_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--hand", required=True, help="robot hand (see `retarget hands`)")
+    p.add_argument("--pair", required=True, help="OBJECT/TYPE, e.g. cube2/tripod")
+    p.add_argument(
+        "--dataset",
+        type=Path,
+        default=None,
+        help="DexCanvas Lance dataset (default: the built-in demonstrations)",
+    )
+    p.add_argument("--index", type=int, default=0, help="which demonstration of the pair")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="output directory (default runs/<hand>_<object>_<type>_<index>)",
+    )
+    p.add_argument("--backend", choices=["pinocchio", "mink"], default="pinocchio")
+    p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
+
+
+def _run_config(args: argparse.Namespace):
+    from retarget.run import RunConfig
+
+    return RunConfig(
+        hand=args.hand,
+        pair=args.pair,
+        dataset=args.dataset,
+        index=args.index,
+        out=args.out,
+        backend=args.backend,
+        progress=not args.quiet,
+    )
+
+
+def _run(cfg) -> dict:
+    from retarget.run import run_retarget
+
+    return run_retarget(cfg)
+
+
 # ---------------------------------------------------------------------------- command table
 
 
@@ -104,6 +149,12 @@ class Command:
 
 
 COMMANDS: dict[str, Command] = {
+    "run": Command(
+        help="retarget a demonstration onto a robot hand, re-simulate it, write metrics",
+        add_arguments=_add_run_args,
+        make_config=_run_config,
+        run=_run,
+    ),
     "hands": Command(
         help="list the robot hands: DoF, actuators, finger mapping, model source",
         add_arguments=_add_hands_args,
@@ -138,7 +189,7 @@ def main(argv: list[str] | None = None) -> int:
     cmd = COMMANDS[args.command]
     try:
         result = cmd.run(cmd.make_config(args))
-    except RetargetError as e:
+    except (RetargetError, DexCanvasError) as e:
         print(f"retarget {args.command}: error: {e}", file=sys.stderr)
         return 2
     return cmd.exit_code(result)
