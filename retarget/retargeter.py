@@ -485,6 +485,15 @@ class _MinkSolver:
             def compute_jacobian(self, configuration):
                 return objective.jacobian(self._state(configuration))
 
+            def compute_qp_residual(self, configuration):
+                # mink stacks (√W J, −√W e) of all tasks: H = JᵀWJ, c = JᵀWe, as ours.
+                s = self._state(configuration)
+                e = objective.error(s)
+                if e.size == 0:
+                    return np.zeros((0, s.nv)), np.zeros(0), 0.0
+                sw = np.sqrt(objective.weights(e.shape[0]))
+                return sw[:, None] * objective.jacobian(s), -sw * e, 0.0
+
             def compute_qp_objective(self, configuration):
                 H, c = objective.qp_terms(self._state(configuration))
                 return mink.Objective(H, c)

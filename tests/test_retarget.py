@@ -1,0 +1,195 @@
+"""Retargeting on real hand models: round trip, backends, penetration, CLI and its errors."""
+
+from __future__ import annotations
+
+import json
+
+import mujoco
+import numpy as np
+import pytest
+
+from dexcanvas_core.demos.geometry import object_geometry
+from dexcanvas_core.example import example_trajectories
+from dexcanvas_core.io import write_dataset
+from dexcanvas_core.keypoints import MANO21
+from dexcanvas_core.rotations import matrix_to_aa
+from dexcanvas_core.trajectory import HandTrack, ObjectTrack, Trajectory
+from retarget.cli import main
+from retarget.hands import get_hand
+from retarget.hands.base import WRIST_SITE
+from retarget.kinematics import MujocoKinematics, PinocchioKinematics
+from retarget.retargeter import RetargetConfig, Retargeter
+from retarget.state import RobotState
+
+
+@pytest.fixture(scope="module")
+def demo() -> Trajectory:
+    """A short scripted cube2/tripod demonstration (grasp and lift frames)."""
+    traj = next(t for t in example_trajectories(seed=0) if t.scene == "cube2")
+    return traj.slice(100, 220)
+
+
+def _robot_keypoint_human(rt: Retargeter, q: np.ndarray) -> Trajectory:
+    """A one-frame 'human' whose scaled keypoints are the robot's own sites at ``q``."""
+    kin = rt.kin
+    kin.forward(q)
+    R = kin.site_rotation(WRIST_SITE)
+    p_w = kin.site_position(WRIST_SITE)
+    kp = np.tile(p_w, (21, 1))
+    for name, site in zip(rt.kp_names, rt.kp_sites, strict=True):
+        kp[MANO21.index(name)] = p_w + (kin.site_position(site) - p_w) / rt.scale
+    T = 2
+    hand = HandTrack(
+        name="right",
+        global_pos=np.tile(p_w, (T, 1)),
+        global_rot_aa=np.tile(matrix_to_aa(R), (T, 1)),
+        hand_pose=np.zeros((T, 48)),
+        joint_pos=np.tile(kp, (T, 1, 1)),
+    )
+    return Trajectory(uuid="robot-pose", timestamp=np.arange(T) / 120.0, fps=120.0, hands=[hand],
+                      objects=[])  # fmt: skip
+
+
+@pytest.mark.parametrize("hand_name", ["allegro", "shadow"])
+def test_round_trip_recovers_robot_keypoints(hand_name):
+    """Random robot pose → its keypoints → retarget → the same keypoints within 1 mm."""
+    hand = get_hand(hand_name)
+    rt = Retargeter(hand, None, RetargetConfig(first_frame_iterations=60, iterations=10,
+                                               w_posture=0.0, w_smooth=0.0, max_joint_speed=1e3))  # fmt: skip
+    rng = np.random.default_rng(0)
+    lo, hi = rt.lower.copy(), rt.upper.copy()
+    for _ in range(3):
+        q = hand.default_qpos(rt.scene.model)[: rt.nq].copy()
+        q[:3] = rng.uniform(-0.2, 0.2, 3)
+        q[3:6] = rng.uniform(-0.5, 0.5, 3)
+        fin = np.isfinite(lo[6:]) & np.isfinite(hi[6:])
+        q[6:][fin] = lo[6:][fin] + rng.uniform(0.2, 0.8, fin.sum()) * (hi[6:] - lo[6:])[fin]
+        # Respect couplings: project through the model's equality (follower from leader).
+        q = _coupled(rt.scene.model, q)
+        human = _robot_keypoint_human(rt, q)
+        out = rt.retarget(human)
+        assert out.keypoint_err[-1] < 1e-3, out.keypoint_err
+
+
+def _coupled(m, q):
+    q = q.copy()
+    for e in range(m.neq):
+        if m.eq_type[e] == mujoco.mjtEq.mjEQ_JOINT and m.eq_obj2id[e] >= 0:
+            c = m.eq_data[e]
+            x = q[m.jnt_qposadr[m.eq_obj2id[e]]]
+            q[m.jnt_qposadr[m.eq_obj1id[e]]] = c[0] + c[1] * x + c[2] * x**2
+    return q
+
+
+def test_backends_agree_on_kinematic_terms(demo):
+    hand = get_hand("allegro")
+    rt = Retargeter(hand, object_geometry("cube2"))
+    m = rt.scene.model
+    pin_kin, mj_kin = PinocchioKinematics(m), MujocoKinematics(m, nq=rt.nq)
+    tg = rt.human_targets(demo)
+    rt.keypoints.set_targets(tg["keypoints"][10])
+    rt.wrist.set_target(tg["wrist_p"][10], tg["wrist_R"][10])
+    rng = np.random.default_rng(1)
+    q = rt.q_default + rng.normal(scale=0.05, size=rt.nq)
+    for obj in (rt.keypoints, rt.wrist, rt.vectors):
+        if obj is rt.vectors:
+            obj.set_targets(tg["vectors"][10])
+        pin_kin.forward(q)
+        mj_kin.forward(q)
+        Hp, cp = obj.qp_terms(RobotState(q=q, kin=pin_kin))
+        Hm, cm = obj.qp_terms(RobotState(q=q, kin=mj_kin))
+        np.testing.assert_allclose(Hp, Hm, atol=1e-8)
+        np.testing.assert_allclose(cp, cm, atol=1e-8)
+
+
+def test_mink_backend_runs_and_matches(demo):
+    hand = get_hand("allegro")
+    geo = object_geometry("cube2")
+    a = Retargeter(hand, geo, RetargetConfig(backend="pinocchio")).retarget(demo)
+    b = Retargeter(hand, geo, RetargetConfig(backend="mink")).retarget(demo)
+    # Same objectives; the limits differ in form (mink's collision limit is its own), so the
+    # solutions agree to within a few millimetres of keypoint error.
+    assert abs(a.keypoint_err.mean() - b.keypoint_err.mean()) < 5e-3
+
+
+def test_no_penetration_beyond_margin(demo):
+    cfg = RetargetConfig()
+    out = Retargeter(get_hand("shadow"), object_geometry("cube2"), cfg).retarget(demo)
+    assert out.min_distance.min() > -(cfg.penetration_margin + 1e-3)
+    assert out.contact_active.any()
+
+
+def test_surface_contact_jacobian_matches_finite_differences(demo):
+    rt = Retargeter(get_hand("allegro"), object_geometry("cube2"))
+    tg = rt.human_targets(demo)
+    t = int(np.flatnonzero(tg["contact_active"].any(axis=1))[0])
+    rt.scene.set_object_pose(demo.object.pos[t], demo.object.rot_aa[t])
+    rt.contacts.set_contacts(np.ones(len(rt.tip_sites), bool), tg["contact_points"][t])
+    q = rt.q_default.copy()
+    q[:6] = [*tg["wrist_p"][t], 0, 0, 0]
+    rt.kin.forward(q)
+    s = RobotState(q=q, kin=rt.kin)
+    J = rt.contacts.jacobian(s)
+    # J is the Jacobian of each finger's nearest surface point held fixed to its link (the
+    # Gauss–Newton model of the term); check it against that point moved by finite differences.
+    pts = rt.contacts.finger_points(q)
+    kin = rt.kin
+    local = [kin.data.oMf[kin.body_frames[b]].actInv(p) for b, p in pts]
+
+    def points(qq):
+        kin.forward(qq)
+        return np.concatenate(
+            [kin.data.oMf[kin.body_frames[b]].act(x) for (b, _), x in zip(pts, local, strict=True)]
+        )
+
+    p0 = points(q)
+    eps = 1e-7
+    for i in range(rt.nq):
+        dq = np.zeros(rt.nq)
+        dq[i] = eps
+        np.testing.assert_allclose((points(q + dq) - p0) / eps, J[:, i], atol=1e-5)
+
+
+@pytest.fixture(scope="module")
+def small_dataset(tmp_path_factory, demo):
+    path = tmp_path_factory.mktemp("rt") / "d.lance"
+    write_dataset([demo], path)
+    return path
+
+
+def test_cli_run_writes_outputs(small_dataset, tmp_path, capsys):
+    out = tmp_path / "run"
+    rc = main(["run", "--hand", "allegro", "--pair", "cube2/tripod", "--dataset",
+               str(small_dataset), "--out", str(out), "--quiet"])  # fmt: skip
+    assert rc == 0
+    m = json.loads((out / "metrics.json").read_text())
+    for key in ("success", "object_pos_err_max_m", "object_pos_err_mean_m",
+                "object_rot_err_mean_rad", "keypoint_err_mean_m", "penetration_max_m",
+                "ms_per_frame"):  # fmt: skip
+        assert key in m
+    z = np.load(out / "robot_trajectory.npz")
+    assert z["q"].shape == (120, len(z["joint_names"]))
+    assert z["finger_force_world"].shape == (120, 5, 3)
+    assert not list(out.glob(".*tmp"))
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--hand", "shdow", "--pair", "cube2/tripod"], "did you mean 'shadow'"),
+        (["--hand", "shadow", "--pair", "cube2/tripd"], "did you mean 'tripod'"),
+        (["--hand", "shadow", "--pair", "cube2"], "cube2/tripod"),
+        (["--hand", "panda", "--pair", "sphere1/rolling"], "cannot perform 'rolling'"),
+    ],
+)
+def test_cli_run_errors(argv, message, small_dataset, capsys):
+    assert main(["run", *argv, "--dataset", str(small_dataset), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "retarget run: error:" in err and message in err
+
+
+def test_cli_run_pair_missing_from_dataset(small_dataset, capsys):
+    rc = main(["run", "--hand", "shadow", "--pair", "sphere1/tripod", "--dataset",
+               str(small_dataset), "--quiet"])  # fmt: skip
+    assert rc == 2
+    assert "no trajectory matches" in capsys.readouterr().err
