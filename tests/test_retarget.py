@@ -13,7 +13,7 @@ from dexcanvas_core.example import example_trajectories
 from dexcanvas_core.io import write_dataset
 from dexcanvas_core.keypoints import MANO21
 from dexcanvas_core.rotations import matrix_to_aa
-from dexcanvas_core.trajectory import HandTrack, ObjectTrack, Trajectory
+from dexcanvas_core.trajectory import HandTrack, Trajectory
 from retarget.cli import main
 from retarget.hands import get_hand
 from retarget.hands.base import WRIST_SITE
@@ -46,16 +46,26 @@ def _robot_keypoint_human(rt: Retargeter, q: np.ndarray) -> Trajectory:
         hand_pose=np.zeros((T, 48)),
         joint_pos=np.tile(kp, (T, 1, 1)),
     )
-    return Trajectory(uuid="robot-pose", timestamp=np.arange(T) / 120.0, fps=120.0, hands=[hand],
-                      objects=[])  # fmt: skip
+    return Trajectory(
+        uuid="robot-pose", timestamp=np.arange(T) / 120.0, fps=120.0, hands=[hand], objects=[]
+    )
 
 
 @pytest.mark.parametrize("hand_name", ["allegro", "shadow"])
 def test_round_trip_recovers_robot_keypoints(hand_name):
     """Random robot pose → its keypoints → retarget → the same keypoints within 1 mm."""
     hand = get_hand(hand_name)
-    rt = Retargeter(hand, None, RetargetConfig(first_frame_iterations=60, iterations=10,
-                                               w_posture=0.0, w_smooth=0.0, max_joint_speed=1e3))  # fmt: skip
+    rt = Retargeter(
+        hand,
+        None,
+        RetargetConfig(
+            first_frame_iterations=60,
+            iterations=10,
+            w_posture=0.0,
+            w_smooth=0.0,
+            max_joint_speed=1e3,
+        ),
+    )
     rng = np.random.default_rng(0)
     lo, hi = rt.lower.copy(), rt.upper.copy()
     for _ in range(3):
@@ -159,8 +169,20 @@ def small_dataset(tmp_path_factory, demo):
 
 def test_cli_run_writes_outputs(small_dataset, tmp_path, capsys):
     out = tmp_path / "run"
-    rc = main(["run", "--hand", "allegro", "--pair", "cube2/tripod", "--dataset",
-               str(small_dataset), "--out", str(out), "--quiet"])  # fmt: skip
+    rc = main(
+        [
+            "run",
+            "--hand",
+            "allegro",
+            "--pair",
+            "cube2/tripod",
+            "--dataset",
+            str(small_dataset),
+            "--out",
+            str(out),
+            "--quiet",
+        ]
+    )
     assert rc == 0
     m = json.loads((out / "metrics.json").read_text())
     for key in ("success", "object_pos_err_max_m", "object_pos_err_mean_m",
@@ -189,7 +211,17 @@ def test_cli_run_errors(argv, message, small_dataset, capsys):
 
 
 def test_cli_run_pair_missing_from_dataset(small_dataset, capsys):
-    rc = main(["run", "--hand", "shadow", "--pair", "sphere1/tripod", "--dataset",
-               str(small_dataset), "--quiet"])  # fmt: skip
+    rc = main(
+        [
+            "run",
+            "--hand",
+            "shadow",
+            "--pair",
+            "sphere1/tripod",
+            "--dataset",
+            str(small_dataset),
+            "--quiet",
+        ]
+    )
     assert rc == 2
     assert "no trajectory matches" in capsys.readouterr().err
