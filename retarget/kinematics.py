@@ -143,6 +143,7 @@ class PinocchioKinematics:
             )
         self.model = model
         self.data = model.createData()
+        self._jac_cache: dict[str, np.ndarray] = {}
         self.site_frames = site_frames
         self.body_frames = body_frames
         self.joint_names = joint_names
@@ -158,6 +159,7 @@ class PinocchioKinematics:
         q = np.asarray(q, dtype=np.float64)
         pin.computeJointJacobians(self.model, self.data, q)
         pin.updateFramePlacements(self.model, self.data)
+        self._jac_cache.clear()
 
     def frame_id(self, site: str) -> int:
         try:
@@ -180,10 +182,15 @@ class PinocchioKinematics:
         in world axes (Pinocchio ``LOCAL_WORLD_ALIGNED``), after :meth:`forward`."""
         import pinocchio as pin
 
-        J = pin.getFrameJacobian(
-            self.model, self.data, self.frame_id(site), pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-        )
-        return np.asarray(J).reshape(6, self.model.nv)  # eigenpy returns (6,) when nv == 1
+        J = self._jac_cache.get(site)
+        if J is None:
+            J = pin.getFrameJacobian(
+                self.model, self.data, self.frame_id(site), pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+            )
+            J = np.asarray(J).reshape(6, self.model.nv)  # eigenpy returns (6,) when nv == 1
+            J.flags.writeable = False  # cached until the next forward(): callers must copy
+            self._jac_cache[site] = J
+        return J
 
     def point_jacobian(self, body: str, p_world: np.ndarray) -> np.ndarray:
         """(3, nv) Jacobian of a point rigidly attached to ``body``, given in world coordinates."""
