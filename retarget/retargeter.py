@@ -82,8 +82,10 @@ class RetargetConfig:
     """Penetration [m] the non-penetration rows allow (soft contacts need a little)."""
     collision_distmax: float = 0.03
     """Hand–object pairs farther than this [m] are left out of an iterate."""
-    contact_threshold: float = 0.006
-    """Human fingertip–surface distance [m] below which a fingertip is in contact (inferred)."""
+    contact_threshold: float = 0.012
+    """Human fingertip keypoint–surface distance [m] below which a fingertip is in contact
+    (inferred when the trajectory has no contact records). MANO's tip keypoint sits at the end
+    of the finger, about one pad radius (7–9 mm) from a surface the pad touches."""
     max_joint_speed: float = 20.0
     """Velocity bound [rad/s or m/s] per joint."""
     squeeze_depth: float = 0.004
@@ -234,10 +236,12 @@ class Retargeter:
         coupling = CouplingLimit.from_mjmodel(m)
         if coupling.rows:
             self.limits.append(coupling)
-        self.collision = None
-        if geometry is not None and self.cfg.use_collision and self.scene.object_geoms:
-            pairs_geom = [(a, b) for a in self.scene.hand_geoms for b in self.scene.object_geoms]
-            self.collision = CollisionLimit(
+        self.collision = None  # the non-penetration limit (when use_collision)
+        self.distance_query = None  # the same query, for metrics, whatever use_collision says
+        if geometry is not None and self.scene.object_geoms:
+            obstacles = self.scene.object_geoms + self.scene.table_geoms
+            pairs_geom = [(a, b) for a in self.scene.hand_geoms for b in obstacles]
+            self.distance_query = CollisionLimit(
                 m,
                 self.scene.data,
                 pairs_geom,
@@ -245,7 +249,9 @@ class Retargeter:
                 margin=c.penetration_margin,
                 distmax=c.collision_distmax,
             )
-            self.limits.append(self.collision)
+            if self.cfg.use_collision:
+                self.collision = self.distance_query
+                self.limits.append(self.collision)
         self._mink = None
         if self.cfg.backend == "mink":
             self._mink = _MinkSolver(self)
@@ -321,19 +327,15 @@ class Retargeter:
         """Retarget every frame of ``traj``; ``progress(done, total)`` is called per frame."""
         traj.validate()
         tg = self.human_targets(traj)
-        T, F = traj.num_frames, len(self.tip_sites)
+        T = traj.num_frames
         q = self.q_default.copy()
         from retarget.hands.base import wrist_qpos_from_mano
 
         q[:6] = wrist_qpos_from_mano(tg["wrist_R"][0], tg["wrist_p"][0])
         Q = np.zeros((T, self.nq))
         Qc = np.zeros((T, self.nq))
-        tips = np.zeros((T, F, 3))
-        kp_err = np.zeros(T)
-        min_d = np.full(T, np.inf)
-        c_err = np.full((T, F), np.nan)
         has_obj = self.geometry is not None and bool(traj.objects)
-        t0 = time.perf_counter()
+        solve_s = 0.0
         self.smooth.set_previous(None)
         for t in range(T):
             if has_obj:
@@ -346,25 +348,15 @@ class Retargeter:
                 active = tg["contact_active"][t] & self.cfg.use_contacts
                 self.contacts.set_contacts(active, tg["contact_points"][t])
             n_it = self.cfg.first_frame_iterations if t == 0 else self.cfg.iterations
+            t0 = time.perf_counter()
             q = self._solve_frame(q, n_it, traj.timestamp, t)
+            Qc[t] = q + self._squeeze(q, tg["contact_active"][t], tg["contact_normals"][t])
+            solve_s += time.perf_counter() - t0
             self.smooth.set_previous(q)
             Q[t] = q
-            Qc[t] = q + self._squeeze(q, tg["contact_active"][t], tg["contact_normals"][t])
-            self.kin.forward(q)
-            tips[t] = [self.kin.site_position(s) for s in self.tip_sites]
-            robot_kp = np.stack([self.kin.site_position(s) for s in self.kp_sites])
-            kp_err[t] = float(np.mean(np.linalg.norm(robot_kp - tg["keypoints"][t], axis=1)))
-            if self.collision is not None:
-                d = self.collision.distances(q)
-                min_d[t] = min((x[2] for x in d), default=np.inf)
-            if self.contacts is not None and tg["contact_active"][t].any():
-                self.contacts.set_contacts(tg["contact_active"][t], tg["contact_points"][t])
-                d_c = self.contacts.distances_to_targets(q)
-                act = tg["contact_active"][t]
-                c_err[t, act] = d_c[act]
             if progress is not None:
                 progress(t + 1, T)
-        elapsed = time.perf_counter() - t0
+        m = self.measure(traj, Q, tg)
         return RobotTrajectory(
             hand=self.hand.name,
             joint_names=[
@@ -375,12 +367,12 @@ class Retargeter:
             q_command=Qc,
             timestamp=traj.timestamp.copy(),
             tip_sites=list(self.tip_sites),
-            tip_pos_world=tips,
-            keypoint_err=kp_err,
-            min_distance=min_d,
-            contact_active=tg["contact_active"].copy(),
-            contact_err=c_err,
-            solve_time_s=elapsed,
+            tip_pos_world=m["tip_pos_world"],
+            keypoint_err=m["keypoint_err"],
+            min_distance=m["min_distance"],
+            contact_active=m["contact_active"],
+            contact_err=m["contact_err"],
+            solve_time_s=solve_s,
             meta={
                 "backend": self.cfg.backend,
                 "uuid": traj.uuid,
@@ -388,6 +380,50 @@ class Retargeter:
                 "config": {k: v for k, v in self.cfg.__dict__.items()},
             },
         )
+
+    def measure(self, traj: Trajectory, Q: np.ndarray, targets: dict | None = None) -> dict:
+        """Kinematic metrics of any joint trajectory ``Q`` (T, nq) against ``traj``'s targets.
+
+        Returns ``tip_pos_world (T, F, 3)``, ``keypoint_err (T,)`` (mean robot-site distance to
+        the scaled human keypoints [m]), ``min_distance (T,)`` (smallest hand–object signed
+        distance [m], inf without object), ``contact_active (T, F)`` and ``contact_err (T, F)``
+        (distance from the finger surface nearest the object to the human contact point [m],
+        NaN where inactive). The retargeter's own output and baselines are measured alike.
+        """
+        tg = self.human_targets(traj) if targets is None else targets
+        T, F = traj.num_frames, len(self.tip_sites)
+        Q = np.asarray(Q, dtype=np.float64)
+        if Q.shape != (T, self.nq):
+            raise RetargetError(f"joint trajectory has shape {Q.shape}, expected ({T}, {self.nq})")
+        tips = np.zeros((T, F, 3))
+        kp_err = np.zeros(T)
+        min_d = np.full(T, np.inf)
+        c_err = np.full((T, F), np.nan)
+        active_all = np.asarray(tg["contact_active"], bool)
+        has_obj = self.geometry is not None and bool(traj.objects)
+        obj_geoms = set(self.scene.object_geoms)
+        for t in range(T):
+            q = Q[t]
+            if has_obj:
+                self.scene.set_object_pose(traj.object.pos[t], traj.object.rot_aa[t])
+            self.kin.forward(q)
+            tips[t] = [self.kin.site_position(s) for s in self.tip_sites]
+            robot_kp = np.stack([self.kin.site_position(s) for s in self.kp_sites])
+            kp_err[t] = float(np.mean(np.linalg.norm(robot_kp - tg["keypoints"][t], axis=1)))
+            if self.distance_query is not None:
+                d = self.distance_query.distances(q)
+                min_d[t] = min((x[2] for x in d if x[1] in obj_geoms), default=np.inf)
+            if self.contacts is not None and active_all[t].any():
+                self.contacts.set_contacts(active_all[t], tg["contact_points"][t])
+                d_c = self.contacts.distances_to_targets(q)
+                c_err[t, active_all[t]] = d_c[active_all[t]]
+        return {
+            "tip_pos_world": tips,
+            "keypoint_err": kp_err,
+            "min_distance": min_d,
+            "contact_active": active_all.copy(),
+            "contact_err": c_err,
+        }
 
     def _squeeze(self, q: np.ndarray, active: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """Joint offset pressing each contacting finger ``squeeze_depth`` into the surface.
@@ -455,7 +491,7 @@ class _MinkSolver:
         self.limits = [mink.ConfigurationLimit(m, gain=1.0)]
         if rt.collision is not None:
             hand = [m.geom(g).name for g in rt.scene.hand_geoms]
-            obj = [m.geom(g).name for g in rt.scene.object_geoms]
+            obj = [m.geom(g).name for g in rt.scene.object_geoms + rt.scene.table_geoms]
             self.limits.append(
                 mink.CollisionAvoidanceLimit(
                     m,

@@ -85,6 +85,7 @@ class Scene:
     hand_geoms: list[int]
     object_geoms: list[int]
     object_body: int
+    table_geoms: list[int]
 
     def set_object_pose(self, p_world: np.ndarray, rot_aa: np.ndarray) -> None:
         """Pose the (mocap) object: position [m] and axis-angle [rad]."""
@@ -95,11 +96,26 @@ class Scene:
         self.data.mocap_quat[mid] = aa_to_quat_wxyz(np.asarray(rot_aa, dtype=np.float64))
 
 
-def build_retarget_scene(hand, geometry=None) -> Scene:
-    """Hand (floating wrist) + the object as a mocap body, for the kinematic QP."""
+def add_table(spec: mujoco.MjSpec) -> None:
+    """The table: a plane at z = 0 (world frame), the surface the demonstrations start on."""
+    g = spec.worldbody.add_geom(
+        name=TABLE_GEOM,
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[1.0, 1.0, 0.01],
+        rgba=[0.6, 0.6, 0.6, 1.0],
+    )
+    g.contype = 1
+    g.conaffinity = 1
+    g.condim = 3
+
+
+def build_retarget_scene(hand, geometry=None, table: bool = True) -> Scene:
+    """Hand (floating wrist) + the object as a mocap body (+ the table), for the kinematic QP."""
     spec = hand.build_spec()
     if geometry is not None:
         add_object(spec, geometry, mocap=True)
+        if table:
+            add_table(spec)
     model = spec.compile()
     return _scene(model, geometry is not None)
 
@@ -116,6 +132,7 @@ def _scene(model: mujoco.MjModel, with_object: bool) -> Scene:
         g for g in range(model.ngeom) if with_object and model.geom_bodyid[g] == obj_body
     ]
     hand_nq = sum(1 for j in range(model.njnt) if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE)
+    table = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, TABLE_GEOM)
     return Scene(
         model=model,
         data=mujoco.MjData(model),
@@ -123,4 +140,5 @@ def _scene(model: mujoco.MjModel, with_object: bool) -> Scene:
         hand_geoms=hand_geoms,
         object_geoms=object_geoms,
         object_body=obj_body,
+        table_geoms=[table] if table >= 0 else [],
     )

@@ -24,7 +24,7 @@ import numpy as np
 from dexcanvas_core.rotations import aa_to_quat_wxyz, quat_wxyz_to_aa, rotation_angle_between_aa
 from dexcanvas_core.trajectory import Trajectory
 from retarget.errors import RetargetError
-from retarget.scene import OBJECT_BODY, TABLE_GEOM, add_object
+from retarget.scene import OBJECT_BODY, add_object, add_table
 
 log = logging.getLogger(__name__)
 
@@ -101,15 +101,7 @@ def build_sim_scene(hand, geometry, *, table: bool = True) -> mujoco.MjModel:
     """Hand with its actuators + the object as a free body (+ a table plane at z = 0)."""
     spec = hand.build_spec()
     if table:
-        g = spec.worldbody.add_geom(
-            name=TABLE_GEOM,
-            type=mujoco.mjtGeom.mjGEOM_PLANE,
-            size=[1.0, 1.0, 0.01],
-            rgba=[0.6, 0.6, 0.6, 1.0],
-        )
-        g.contype = 1
-        g.conaffinity = 1
-        g.condim = 3
+        add_table(spec)
     add_object(spec, geometry, mocap=False)
     return spec.compile()
 

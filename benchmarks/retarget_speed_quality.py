@@ -1,0 +1,614 @@
+"""Retargeting speed and quality per robot hand: our QP against dex-retargeting, same inputs.
+
+For every hand × demonstration pair the same human trajectory is retargeted twice onto the same
+robot model (the hand's compiled ``MjModel``):
+
+* **ours** — ``Retargeter`` (Pinocchio backend, default ``RetargetConfig``: keypoints, wrist
+  pose, fingertip vectors, contact targets, non-penetration, joint/velocity/coupling limits);
+* **dex-retargeting** — its position retargeting (PyPI ``dex-retargeting``, free 6-DoF wrist
+  unless ``--dex-wrist fixed``, its default optimizer settings) on a URDF exported from the
+  same ``MjModel``, fed the same scaled keypoint targets (``retarget.baselines.
+  dex_retargeting``).
+
+Measured per run:
+
+* **ms/frame** — wall time of the per-frame solves only, divided by the frame count. Ours: the
+  time inside ``Retargeter._solve_frame`` (QP build + solve iterations), not the per-frame
+  metrics ``retarget()`` also records nor the grip squeeze (those are in ``ms_per_frame_total``
+  in the JSON). dex-retargeting: the time inside its ``SeqRetargeting.retarget`` calls.
+* **kp err** — mean over frames of the mean distance between the robot keypoint sites and their
+  scaled human targets (``Retargeter.human_targets``), both methods through
+  ``retarget.baselines.measure_trajectory`` (the definitions ``RobotTrajectory`` uses).
+* **penetration** — deepest hand–object penetration of the kinematic solution [mm]
+  (``CollisionLimit.distances`` on the retargeting scene, object at its human pose).
+* **contact err** — mean over human fingertip contacts of the distance from the robot finger's
+  surface point nearest the object to the human contact point (``RobotTrajectory.contact_err``).
+* **strict / loose success** — ``Resimulator`` (robot actuators track the joint trajectory,
+  object free on a table): strict = no frame with object position error > 5 cm (DexCanvas);
+  loose = mean error < 10 cm and < 0.5 rad. Ours is re-simulated on ``q_command`` (the solution
+  plus the grip squeeze) and, for a like-for-like comparison, on ``q`` (no squeeze);
+  dex-retargeting on its ``q``. Kinematic metrics of both "ours" rows are those of ``q``.
+
+Pairs: ``--n-pairs`` feasible pairs of the built-in demonstrations
+(``dexcanvas_core.demos``), spread evenly over the four groups (power, intermediate,
+precision, in-hand) by a deterministic round robin over manipulation types and objects; a
+hand skips pairs it cannot perform (``retarget.run.check_pair``; counted). Prints a table per
+hand and an overall table with the targets, and writes JSON (per-run rows and aggregates).
+
+    python benchmarks/retarget_speed_quality.py                 # 20 pairs, every hand
+    python benchmarks/retarget_speed_quality.py --quick         # smoke run: 2 pairs, 1 hand
+    python benchmarks/retarget_speed_quality.py --hands allegro shadow --max-frames 240
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+import traceback
+from collections import defaultdict
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+DEFAULT_OUT = Path(__file__).parent / "results" / "retarget_speed_quality.json"
+OURS, OURS_Q, DEX = "ours", "ours (no squeeze)", "dex-retargeting"
+METHODS = (OURS, OURS_Q, DEX)
+
+# The issue's targets (reported against, not enforced).
+TARGET_MS = 0.5
+TARGET_PEN_MM = 2.0
+TARGET_SUCCESS_RATIO = 1.5
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """One benchmark run."""
+
+    hands: tuple[str, ...] | None = None
+    """Hands to run; ``None``: every registered hand."""
+    n_pairs: int = 20
+    """Demonstration pairs, spread over the four groups."""
+    max_frames: int | None = None
+    """Crop each demonstration to this many frames (around the start of the object motion)."""
+    out: Path = DEFAULT_OUT
+    operator: str = "operator1"
+    seed: int = 0
+    dex_wrist: str = "free"
+    """dex-retargeting's wrist: ``free`` (optimised) or ``fixed`` (the human wrist pose)."""
+
+    def validate(self) -> BenchConfig:
+        if self.n_pairs < 1:
+            raise SystemExit("--n-pairs must be >= 1")
+        if self.max_frames is not None and self.max_frames < 2:
+            raise SystemExit("--max-frames must be >= 2")
+        if self.dex_wrist not in ("free", "fixed"):
+            raise SystemExit("--dex-wrist must be free or fixed")
+        return self
+
+
+# ------------------------------------------------------------------------------ demonstrations
+def select_pairs(pairs) -> list:
+    """The order in which pairs are taken, spreading them over the four groups deterministically.
+
+    Within a group: round robin over its manipulation types (catalogue order); each type walks
+    its objects starting at an offset that differs per type, so types do not all pick the same
+    object. Groups are then interleaved (power, intermediate, precision, in-hand, power, …).
+    Returns every pair in that order; callers take the first ``n`` that work, per group quota.
+    """
+    from dexcanvas_core.taxonomy import GROUPS
+
+    by_group: dict[str, dict[str, list]] = {g: defaultdict(list) for g in GROUPS}
+    for p in pairs:
+        by_group[p.manipulation_type.group][p.manipulation_type.name].append(p)
+    group_orders = {}
+    for g, types in by_group.items():
+        order = []
+        lists = list(types.values())
+        depth = max((len(x) for x in lists), default=0)
+        for r in range(depth):
+            for k, objs in enumerate(lists):
+                if r < len(objs):
+                    order.append(objs[(r + 3 * k) % len(objs)])
+        group_orders[g] = order
+    out = []
+    depth = max((len(o) for o in group_orders.values()), default=0)
+    for r in range(depth):
+        for g in GROUPS:
+            if r < len(group_orders[g]):
+                out.append(group_orders[g][r])
+    return out
+
+
+def _crop(traj, max_frames: int | None):
+    """At most ``max_frames`` frames, starting a third of the window before the object moves."""
+    if max_frames is None or traj.num_frames <= max_frames:
+        return traj
+    start, _ = traj.active_range()
+    s = int(np.clip(start - max_frames // 3, 0, traj.num_frames - max_frames))
+    return traj.slice(s, s + max_frames)
+
+
+def load_demonstrations(cfg: BenchConfig, console) -> tuple[list, str, list[dict]]:
+    """``[(pair, trajectory)]``, the demonstrations' source, and the pairs that failed."""
+    from dexcanvas_core.taxonomy import GROUPS
+
+    try:
+        from dexcanvas_core.demos import feasible_pairs, generate_demo
+    except ImportError as e:
+        console.print(
+            f"[yellow]note:[/yellow] dexcanvas_core.demos has no generate_demo/feasible_pairs "
+            f"yet ({e}); falling back to dexcanvas_core.example (6 pick-and-place pairs, no "
+            "in-hand group)"
+        )
+        from dexcanvas_core.example import example_trajectories
+        from dexcanvas_core.taxonomy import Pair
+
+        seen, out = set(), []
+        for traj in example_trajectories(seed=cfg.seed):
+            if traj.operator != cfg.operator or traj.scene in seen:
+                continue
+            seen.add(traj.scene)
+            out.append((Pair.of(traj.scene, traj.gesture), _crop(traj, cfg.max_frames)))
+        return out[: cfg.n_pairs], "dexcanvas_core.example.example_trajectories", []
+
+    candidates = select_pairs(feasible_pairs())
+    quota = {g: cfg.n_pairs // len(GROUPS) + (1 if i < cfg.n_pairs % len(GROUPS) else 0)
+             for i, g in enumerate(GROUPS)}  # fmt: skip
+    out, failed = [], []
+    with _progress(console) as prog:
+        task = prog.add_task("generating demonstrations", total=cfg.n_pairs)
+        for p in candidates:
+            g = p.manipulation_type.group
+            if quota[g] == 0:
+                continue
+            try:
+                demo = generate_demo(p, operator=cfg.operator, seed=cfg.seed)
+            except Exception as e:  # a pair the generator cannot script: take the next one
+                failed.append({"pair": str(p), "error": f"{type(e).__name__}: {e}"})
+                continue
+            quota[g] -= 1
+            out.append((p, _crop(demo.trajectory, cfg.max_frames)))
+            prog.advance(task)
+            if len(out) == cfg.n_pairs:
+                break
+    return out, "dexcanvas_core.demos.generate_demo", failed
+
+
+# ------------------------------------------------------------------------------------- runs
+def _timed_solves(rt):
+    """Wrap ``rt._solve_frame`` to accumulate the time spent in it; returns the accumulator.
+
+    ``Retargeter.retarget`` times its whole loop, which also records per-frame metrics and the
+    grip squeeze; the per-frame solve is what compares with dex-retargeting's per-frame call.
+    """
+    acc = {"s": 0.0}
+    solve = rt._solve_frame
+
+    def timed(*args, **kwargs):
+        t0 = time.perf_counter()
+        q = solve(*args, **kwargs)
+        acc["s"] += time.perf_counter() - t0
+        return q
+
+    rt._solve_frame = timed
+    return acc
+
+
+def table_penetration(sim, q: np.ndarray) -> float | None:
+    """Deepest penetration [m] of the hand's collision geoms into the re-simulation's table
+    (z = 0 plane) along the joint trajectory ``q``, kinematically (no simulation). A diagnostic:
+    the retargeting scene has no table, so a hand posed below it is pushed up in simulation."""
+    import mujoco
+
+    from retarget.scene import TABLE_GEOM
+
+    m = sim.model
+    table = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, TABLE_GEOM)
+    if table < 0:
+        return None
+    geoms = [
+        g
+        for g in range(m.ngeom)
+        if g != table
+        and m.geom_bodyid[g] != sim.object_body
+        and (m.geom_contype[g] or m.geom_conaffinity[g])
+    ]
+    d = mujoco.MjData(m)
+    fromto = np.zeros(6)
+    worst = 0.0
+    for qt in q:
+        d.qpos[: sim.hand_nq] = qt
+        mujoco.mj_kinematics(m, d)
+        for g in geoms:
+            worst = max(worst, -mujoco.mj_geomDistance(m, d, g, table, 0.05, fromto))
+    return worst
+
+
+def _resim(sim, q, traj) -> dict:
+    from retarget.errors import RetargetError
+
+    out = {"table_penetration_max_m": table_penetration(sim, q)}
+    try:
+        m = sim.run(q, traj).metrics()
+    except RetargetError as e:  # a diverged simulation is a failed rollout
+        return {**out, "success": False, "success_loose": False, "sim_error": str(e)}
+    # Its penetration is the simulated one; the row's penetration_max_m is the kinematic one.
+    m["sim_penetration_max_m"] = m.pop("penetration_max_m")
+    return {**out, **m}
+
+
+def run_one(hand, pair, traj, baseline) -> list[dict]:
+    """Both methods on one hand × pair: three rows (ours on q_command and q, dex-retargeting)."""
+    from dexcanvas_core.demos.geometry import object_geometry
+    from retarget.baselines import KinematicMetrics, measure_trajectory
+    from retarget.retargeter import RetargetConfig, Retargeter
+    from retarget.validate import Resimulator
+
+    geom = object_geometry(pair.object.id)
+    base = {
+        "hand": hand.name,
+        "pair": str(pair),
+        "group": pair.manipulation_type.group,
+        "frames": traj.num_frames,
+        "uuid": traj.uuid,
+    }
+    rt = Retargeter(hand, geom, RetargetConfig(backend="pinocchio"))
+    solve = _timed_solves(rt)
+    robot = rt.retarget(traj)
+    ours_km = KinematicMetrics.of(robot).summary()
+    tg = rt.human_targets(traj)
+    if rt.kp_sites != baseline.keypoint_sites:
+        raise RuntimeError(f"{hand.name}: baseline keypoint sites differ from the retargeter's")
+    dex = baseline.retarget_targets(tg["keypoints"], tg["wrist_p"], tg["wrist_R"])
+    dex_km = measure_trajectory(rt, traj, dex.q, tg).summary()
+    sim = Resimulator(hand, geom)
+    ms_solve = 1e3 * solve["s"] / traj.num_frames
+    rows = [
+        {**base, "method": OURS, "ms_per_frame": ms_solve, "solve_time_s": solve["s"],
+         "ms_per_frame_total": robot.ms_per_frame, **ours_km, **_resim(sim, robot.q_command, traj)},
+        {**base, "method": OURS_Q, "ms_per_frame": ms_solve, "solve_time_s": solve["s"],
+         "ms_per_frame_total": robot.ms_per_frame, **ours_km, **_resim(sim, robot.q, traj)},
+        {**base, "method": DEX, "ms_per_frame": dex.ms_per_frame, "solve_time_s": dex.solve_time_s,
+         "ms_per_frame_total": dex.ms_per_frame, "solver_failures": dex.solver_failures,
+         **dex_km, **_resim(sim, dex.q, traj)},
+    ]  # fmt: skip
+    return rows
+
+
+# ------------------------------------------------------------------------------- aggregates
+def aggregate(rows: list[dict]) -> dict:
+    """Per method: frame-weighted speed and keypoint error, worst and mean penetration, mean
+    contact error, success rates (errors count as failures)."""
+    out = {}
+    for method in METHODS:
+        rs = [r for r in rows if r["method"] == method]
+        ok = [r for r in rs if "error" not in r]
+        if not rs:
+            continue
+        frames = np.array([r["frames"] for r in ok], float)
+        contact_w = np.array(
+            [r["contact_frames"] for r in ok if r["contact_err_mean_m"] is not None]
+        )
+        contact_v = np.array(
+            [r["contact_err_mean_m"] for r in ok if r["contact_err_mean_m"] is not None]
+        )
+        pens = np.array([r["penetration_max_m"] for r in ok])
+        out[method] = {
+            "runs": len(rs),
+            "errors": len(rs) - len(ok),
+            "frames": int(frames.sum()),
+            "ms_per_frame": 1e3 * sum(r["solve_time_s"] for r in ok) / frames.sum() if ok else None,
+            "ms_per_frame_total": (
+                float(np.sum([r["ms_per_frame_total"] * r["frames"] for r in ok]) / frames.sum())
+                if ok else None
+            ),
+            "keypoint_err_mean_m": (
+                float(np.sum([r["keypoint_err_mean_m"] * r["frames"] for r in ok]) / frames.sum())
+                if ok else None
+            ),
+            "penetration_max_m": float(pens.max()) if ok else None,
+            "penetration_mean_of_max_m": float(pens.mean()) if ok else None,
+            "contact_err_mean_m": (
+                float(np.sum(contact_v * contact_w) / contact_w.sum()) if contact_w.sum() else None
+            ),
+            "success_rate": float(np.mean([bool(r.get("success")) for r in rs])),
+            "success_loose_rate": float(np.mean([bool(r.get("success_loose")) for r in rs])),
+            "sim_penetration_max_m": max(
+                (r["sim_penetration_max_m"] for r in ok if "sim_penetration_max_m" in r),
+                default=None,
+            ),
+            "table_penetration_max_m": max(
+                (r["table_penetration_max_m"] for r in ok
+                 if r.get("table_penetration_max_m") is not None),
+                default=None,
+            ),
+            "runs_below_table_2cm": sum(
+                1 for r in ok if (r.get("table_penetration_max_m") or 0.0) > 0.02
+            ),
+        }  # fmt: skip
+    return out
+
+
+def target_checks(overall: dict) -> list[dict]:
+    """The issue's targets against the overall aggregates."""
+    ours, dex = overall.get(OURS), overall.get(DEX)
+    if not (ours and dex):
+        return []
+
+    def ratio(a, b):
+        return None if b == 0 else a / b
+
+    checks = [
+        {"target": f"ms/frame ≤ {TARGET_MS} (contact + penetration terms on)",
+         "value": ours["ms_per_frame"], "met": ours["ms_per_frame"] <= TARGET_MS},
+        {"target": "keypoint error ≤ dex-retargeting's",
+         "value": [ours["keypoint_err_mean_m"], dex["keypoint_err_mean_m"]],
+         "met": ours["keypoint_err_mean_m"] <= dex["keypoint_err_mean_m"]},
+        {"target": f"penetration ≤ {TARGET_PEN_MM} mm max",
+         "value": ours["penetration_max_m"],
+         "met": 1e3 * ours["penetration_max_m"] <= TARGET_PEN_MM},
+    ]  # fmt: skip
+    for key, label in (("success_rate", "strict"), ("success_loose_rate", "loose")):
+        r = ratio(ours[key], dex[key])
+        checks.append(
+            {
+                "target": f"re-sim {label} success ≥ {TARGET_SUCCESS_RATIO}× dex-retargeting's",
+                "value": [ours[key], dex[key]],
+                "ratio": r,
+                "met": (ours[key] >= TARGET_SUCCESS_RATIO * dex[key]) and ours[key] > 0,
+            }
+        )
+    return checks
+
+
+# ----------------------------------------------------------------------------------- output
+def _progress(console):
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+    return Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+    )
+
+
+def _mm(x) -> str:
+    return "–" if x is None else f"{1e3 * x:.2f}"
+
+
+def _pct(x) -> str:
+    return "–" if x is None else f"{100 * x:.0f}"
+
+
+def metrics_table(title: str, agg: dict):
+    from rich.table import Table
+
+    t = Table(
+        title=title,
+        caption=f"{OURS}: re-simulated on q_command (grip squeeze); {OURS_Q}: on q. "
+        "Kinematic columns of both: q. pen: hand–object; table pen: hand below the "
+        "re-simulation's table (diagnostic).",
+    )
+    for col in ("method", "runs", "ms/frame", "kp err mm", "pen max mm", "contact err mm",
+                "strict %", "loose %", "table pen mm"):  # fmt: skip
+        t.add_column(col, justify="left" if col == "method" else "right")
+    for method in METHODS:
+        a = agg.get(method)
+        if a is None:
+            continue
+        t.add_row(
+            method,
+            f"{a['runs']}" + (f" ({a['errors']} err)" if a["errors"] else ""),
+            "–" if a["ms_per_frame"] is None else f"{a['ms_per_frame']:.3f}",
+            _mm(a["keypoint_err_mean_m"]),
+            _mm(a["penetration_max_m"]),
+            _mm(a["contact_err_mean_m"]),
+            _pct(a["success_rate"]),
+            _pct(a["success_loose_rate"]),
+            _mm(a["table_penetration_max_m"]),
+        )
+    return t
+
+
+def targets_table(checks: list[dict]):
+    from rich.table import Table
+
+    t = Table(title="targets (issue)")
+    t.add_column("target")
+    t.add_column("measured", justify="right")
+    t.add_column("met", justify="center")
+    for c in checks:
+        v = c["value"]
+        if "ms/frame" in c["target"]:
+            s = f"{v:.3f} ms"
+        elif "keypoint" in c["target"]:
+            s = f"{1e3 * v[0]:.2f} vs {1e3 * v[1]:.2f} mm"
+        elif "penetration" in c["target"]:
+            s = f"{1e3 * v:.2f} mm"
+        else:
+            s = f"{100 * v[0]:.0f}% vs {100 * v[1]:.0f}%" + (
+                f" ({c['ratio']:.2f}×)" if c.get("ratio") is not None else ""
+            )
+        t.add_row(c["target"], s, "[green]yes[/green]" if c["met"] else "[red]no[/red]")
+    return t
+
+
+def _versions() -> dict:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for dist in ("dexcanvas-retarget", "dex-retargeting", "mujoco", "pin", "numpy", "nlopt",
+                 "torch", "qpsolvers", "daqp"):  # fmt: skip
+        try:
+            out[dist] = version(dist)
+        except PackageNotFoundError:
+            out[dist] = None
+    return out
+
+
+def _atomic_write_json(path: Path, obj) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(obj, indent=2, default=_json_default))
+    os.replace(tmp, path)
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+# ------------------------------------------------------------------------------------- main
+def run_benchmark(cfg: BenchConfig, console=None) -> dict:
+    """Run every hand × pair, print the tables, write the JSON; return the JSON document."""
+    from rich.console import Console
+
+    from dexcanvas_core.taxonomy import GROUPS
+    from retarget.baselines import DexRetargetingBaseline, DexRetargetingConfig
+    from retarget.hands import available_hands, get_hand
+    from retarget.run import check_pair
+
+    # Tables are wider than the 80 columns rich assumes off a terminal.
+    console = console or Console(width=None if sys.stdout.isatty() else 120)
+    cfg = cfg.validate()
+    t_start = time.perf_counter()
+    load0 = os.getloadavg()
+    hands = [get_hand(h) for h in (cfg.hands or available_hands())]
+    demos, source, demo_failures = load_demonstrations(cfg, console)
+    if not demos:
+        raise SystemExit("no demonstrations to run")
+    groups = {g: sum(1 for p, _ in demos if p.manipulation_type.group == g) for g in GROUPS}
+    console.print(
+        f"{len(demos)} pairs from {source} ({', '.join(f'{g} {n}' for g, n in groups.items())}); "
+        f"hands: {', '.join(h.name for h in hands)}"
+    )
+    rows: list[dict] = []
+    skipped: list[dict] = []
+    jobs = []
+    for hand in hands:
+        for pair, traj in demos:
+            try:
+                check_pair(hand, pair.manipulation_type)
+            except Exception as e:
+                skipped.append({"hand": hand.name, "pair": str(pair), "reason": str(e)})
+                continue
+            jobs.append((hand, pair, traj))
+    baselines: dict[str, object] = {}
+    with _progress(console) as prog:
+        task = prog.add_task("retargeting + re-simulating", total=len(jobs))
+        for hand, pair, traj in jobs:
+            prog.update(task, description=f"{hand.name} · {pair}")
+            try:
+                if hand.name not in baselines:
+                    baselines[hand.name] = DexRetargetingBaseline(
+                        hand, DexRetargetingConfig(wrist=cfg.dex_wrist)
+                    )
+                rows.extend(run_one(hand, pair, traj, baselines[hand.name]))
+            except Exception as e:  # recorded in the JSON and counted in the tables
+                err = f"{type(e).__name__}: {e}"
+                console.print(f"[red]{hand.name} · {pair}: {err}[/red]")
+                tb = traceback.format_exc(limit=3)
+                for method in METHODS:
+                    rows.append({"hand": hand.name, "pair": str(pair), "method": method,
+                                 "group": pair.manipulation_type.group, "frames": traj.num_frames,
+                                 "error": err, "traceback": tb})  # fmt: skip
+            prog.advance(task)
+
+    per_hand = {h.name: aggregate([r for r in rows if r["hand"] == h.name]) for h in hands}
+    per_group = {g: aggregate([r for r in rows if r["group"] == g]) for g in GROUPS}
+    overall = aggregate(rows)
+    checks = target_checks(overall)
+    for h in hands:
+        if per_hand[h.name]:
+            n_skip = sum(1 for s in skipped if s["hand"] == h.name)
+            title = f"{h.name}" + (f" ({n_skip} pair(s) skipped: cannot perform)" if n_skip else "")
+            console.print(metrics_table(title, per_hand[h.name]))
+    console.print(metrics_table(f"overall: {len(hands)} hand(s) × {len(demos)} pair(s)", overall))
+    if checks:
+        console.print(targets_table(checks))
+    doc = {
+        "benchmark": "retarget_speed_quality",
+        "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+        "config": {**asdict(cfg), "out": str(cfg.out)},
+        "demonstrations": {
+            "source": source,
+            "pairs": [str(p) for p, _ in demos],
+            "frames": {str(p): t.num_frames for p, t in demos},
+            "generation_failures": demo_failures,
+        },
+        "hands": [h.name for h in hands],
+        "skipped": skipped,
+        "machine": {
+            "platform": platform.platform(),
+            "python": platform.python_version(),
+            "cpu_count": os.cpu_count(),
+            "loadavg_start": load0,
+            "loadavg_end": os.getloadavg(),
+        },
+        "versions": _versions(),
+        "definitions": {
+            "ms_per_frame": "per-frame solve time only (ours: Retargeter._solve_frame; "
+            "dex-retargeting: SeqRetargeting.retarget), total / frames",
+            "ms_per_frame_total": "ours: the whole Retargeter.retarget loop (incl. in-loop "
+            "metrics and grip squeeze) / frames",
+            "keypoint_err_mean_m": "mean over frames of the mean robot-site to scaled-target "
+            "distance (frame-weighted in aggregates)",
+            "penetration_max_m": "deepest kinematic hand-object penetration (max over frames; "
+            "aggregates: max over runs)",
+            "contact_err_mean_m": "mean over active fingertip contacts (contact-frame-weighted "
+            "in aggregates)",
+            "success": "Resimulator strict rule (no frame > 5 cm)",
+            "success_loose": "Resimulator loose rule (mean < 10 cm and < 0.5 rad)",
+            "sim_penetration_max_m": "deepest hand-object penetration seen in the re-simulation",
+            "table_penetration_max_m": "deepest kinematic penetration of the hand into the "
+            "re-simulation's table plane along the re-simulated joint trajectory (diagnostic)",
+        },
+        "targets": checks,
+        "aggregates": {"overall": overall, "per_hand": per_hand, "per_group": per_group},
+        "runs": rows,
+        "wall_time_s": time.perf_counter() - t_start,
+    }
+    _atomic_write_json(cfg.out, doc)
+    console.print(f"wrote {cfg.out} ({doc['wall_time_s']:.0f} s)")
+    return doc
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--hands", nargs="+", default=None, help="hands to run (default: all)")
+    ap.add_argument("--n-pairs", type=int, default=20, help="pairs over the four groups")
+    ap.add_argument("--max-frames", type=int, default=None, help="crop each demonstration")
+    ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON output")
+    ap.add_argument("--quick", action="store_true", help="smoke run: 2 pairs, 1 hand")
+    ap.add_argument("--operator", default="operator1")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--dex-wrist",
+        choices=("free", "fixed"),
+        default="free",
+        help="dex-retargeting's wrist: optimised (free) or the human wrist pose",
+    )
+    a = ap.parse_args(argv)
+    hands = tuple(a.hands) if a.hands else None
+    n_pairs = a.n_pairs
+    if a.quick:
+        hands = hands[:1] if hands else ("allegro",)
+        n_pairs = min(n_pairs, 2)
+    cfg = BenchConfig(hands=hands, n_pairs=n_pairs, max_frames=a.max_frames, out=a.out,
+                      operator=a.operator, seed=a.seed, dex_wrist=a.dex_wrist)  # fmt: skip
+    run_benchmark(cfg)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
