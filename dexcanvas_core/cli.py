@@ -140,6 +140,33 @@ def run_example(cfg: ExampleConfig) -> Path:
     return out
 
 
+def run_fit_command(args: argparse.Namespace) -> dict:
+    """``dexcanvas fit``: markers → MANO + object poses dataset with per-frame quality flags."""
+    from rich.console import Console
+
+    from dexcanvas_core.mocap import FitConfig, run_fit
+
+    cfg = FitConfig(
+        markers=args.markers,
+        out=args.out,
+        format=args.format,
+        mapping=args.mapping,
+        object_id=args.object,
+        fps=args.fps,
+        units=args.units,
+        up=args.up,
+        side=args.side,
+        overwrite=args.overwrite,
+        calibration_file=args.calibration,
+        save_calibration=args.save_calibration,
+    )
+    with Console().status(f"fitting {args.markers}"):
+        report = run_fit(cfg)
+    d = report.to_dict()
+    print(json.dumps(d, indent=2, sort_keys=True, default=str))
+    return d
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="dexcanvas",
@@ -167,6 +194,20 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--types", nargs="*", default=[], help="manipulation types (names or codes)")
     s.add_argument("--operators", nargs="*", default=[])
 
+    s = sub.add_parser("fit", help="fit MANO hand + object poses to mocap markers (C3D or CSV)")
+    s.add_argument("markers", type=Path, help="marker file (.c3d or .csv)")
+    s.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
+    s.add_argument("--format", choices=["auto", "c3d", "csv"], default="auto")
+    s.add_argument("--mapping", type=Path, default=None, help="marker-name mapping (JSON or CSV)")
+    s.add_argument("--object", default=None, help="catalogue object id carrying obj1..obj4")
+    s.add_argument("--fps", type=float, default=None, help="frame rate [Hz] (default: the file's)")
+    s.add_argument("--units", default=None, help="length unit of the file: mm, cm or m")
+    s.add_argument("--up", choices=["y", "z"], default="y", help="vertical axis of the mocap frame")
+    s.add_argument("--side", choices=["right", "left"], default=None)
+    s.add_argument("--calibration", type=Path, default=None, help="saved subject calibration")
+    s.add_argument("--save-calibration", type=Path, default=None)
+    s.add_argument("--overwrite", action="store_true")
+
     s = sub.add_parser("example", help="write the built-in synthetic example dataset")
     s.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
     s.add_argument("--seed", type=int, default=0)
@@ -189,6 +230,8 @@ def main(argv: list[str] | None = None) -> int:
                 ExportConfig(args.path, args.out, tuple(args.objects), tuple(args.types),
                              tuple(args.operators))
             )  # fmt: skip
+        elif args.command == "fit":
+            run_fit_command(args)
         elif args.command == "example":
             run_example(ExampleConfig(args.out, args.seed, args.overwrite))
     except DexCanvasError as e:

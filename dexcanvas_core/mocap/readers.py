@@ -1,0 +1,556 @@
+"""Reading real captures: C3D and CSV marker files, and the marker-name mapping file.
+
+**C3D** (read with ``ezc3d``, an optional dependency: ``pip install ezc3d``): the ``POINT``
+group's ``LABELS`` (and ``LABELS2``…), ``RATE`` [Hz] and ``UNITS`` (``mm`` when empty); samples
+that the file marks invalid (negative residual) arrive as NaN.
+
+**CSV**, one of two layouts (detected from the header; ``#`` lines before it are comments, and
+``# units: mm`` / ``# fps: 120`` comment lines set the unit and rate):
+
+* *wide*: one row per frame, columns ``<label>_x, <label>_y, <label>_z`` per marker, plus an
+  optional ``frame`` and an optional ``time`` [s] column::
+
+      frame,time,mc2_head_x,mc2_head_y,mc2_head_z,...
+      0,0.0,512.3,88.1,-20.4,...
+
+* *long*: one row per marker sample, columns ``frame, label, x, y, z`` (optional ``time``)::
+
+      frame,time,label,x,y,z
+      0,0.0,mc2_head,512.3,88.1,-20.4
+
+Empty cells, ``nan`` and ``NaN`` are missing samples. Coordinates are in the file's unit
+(millimetres unless declared otherwise) in the mocap frame.
+
+**Mapping file** (JSON, or a two-column CSV ``capture_label,layout_name``) from the capture's
+labels to layout names (``layout.MARKER_NAMES``)::
+
+    {
+      "markers": {"RHand:IndexNail": "index_nail", "Cube:M1": "obj1", ...},
+      "ignore": ["LASI", "RASI"],
+      "object": "cube2",
+      "side": "right",
+      "units": "mm",
+      "up": "y"
+    }
+
+``markers`` maps capture labels (a label may be matched with or without a ``Subject:`` prefix);
+``ignore`` lists labels to drop — they are reported in the stream's ``ignored_labels``, never
+dropped silently. A flat JSON object ``{"capture": "layout", ...}`` is a ``markers`` mapping;
+in the CSV form an empty or ``ignore`` layout name ignores the label. Without a mapping, capture
+labels (prefix stripped) must be layout names. A label that is neither mapped nor ignored is an
+error that lists every such label; so is a mapping onto an unknown layout name, or two labels
+onto one name.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import logging
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dexcanvas_core.errors import DexCanvasError, MissingDependencyError, ValidationError
+from dexcanvas_core.mocap.frames import UNITS_M, MocapFrame
+from dexcanvas_core.mocap.layout import MARKER_NAMES
+from dexcanvas_core.mocap.stream import MarkerStream
+
+log = logging.getLogger(__name__)
+
+FORMATS: tuple[str, ...] = ("c3d", "csv")
+
+
+class MarkerFileError(DexCanvasError, ValueError):
+    """A marker or mapping file that cannot be read, or whose labels do not fit the layout."""
+
+    def __init__(self, message: str, *, path: str | None = None, labels: list[str] | None = None):
+        self.path = path
+        self.labels = labels or []
+        super().__init__(f"{path}: {message}" if path else message)
+
+
+@dataclass(frozen=True)
+class MarkerMapping:
+    """Capture label → layout name, plus labels to ignore and optional capture settings."""
+
+    markers: dict[str, str] = field(default_factory=dict)
+    ignore: tuple[str, ...] = ()
+    object_id: str | None = None
+    side: str | None = None
+    units: str | None = None
+    up: str | None = None
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        bad = sorted({v for v in self.markers.values() if v not in MARKER_NAMES})
+        if bad:
+            raise MarkerFileError(
+                f"mapping targets {bad} are not layout marker names; valid names: "
+                f"{', '.join(MARKER_NAMES)}",
+                path=self.source or None,
+                labels=bad,
+            )
+        seen: dict[str, str] = {}
+        dups = []
+        for k, v in self.markers.items():
+            if v in seen:
+                dups.append(f"{seen[v]!r} and {k!r} → {v!r}")
+            seen[v] = k
+        if dups:
+            raise MarkerFileError(
+                "two capture labels map to one layout marker: " + "; ".join(dups),
+                path=self.source or None,
+            )
+        both = sorted(set(self.markers) & set(self.ignore))
+        if both:
+            raise MarkerFileError(
+                f"labels both mapped and ignored: {both}", path=self.source or None, labels=both
+            )
+
+    def resolve(
+        self, labels: list[str], path: str | None = None
+    ) -> tuple[list[str | None], list[str]]:
+        """Layout name (or ``None`` = ignored) for every capture label, and the ignored labels.
+
+        Raises:
+            MarkerFileError: labels that are neither mapped nor ignored (all listed).
+        """
+        out: list[str | None] = []
+        ignored: list[str] = []
+        unknown: list[str] = []
+        for raw in labels:
+            lab = raw.strip()
+            short = lab.rsplit(":", 1)[-1]
+            if lab in self.ignore or short in self.ignore:
+                out.append(None)
+                ignored.append(lab)
+            elif lab in self.markers:
+                out.append(self.markers[lab])
+            elif short in self.markers:
+                out.append(self.markers[short])
+            elif not self.markers and short in MARKER_NAMES:
+                out.append(short)
+            elif self.markers and short in MARKER_NAMES and short not in self.markers.values():
+                out.append(short)  # already a layout name
+            else:
+                out.append(None)
+                unknown.append(lab)
+        if unknown:
+            how = (
+                'add them to the mapping file\'s "markers" (capture label → layout name) or to '
+                'its "ignore" list'
+                if self.source
+                else "pass a mapping file (--mapping) mapping them to layout names or ignoring them"
+            )
+            raise MarkerFileError(
+                f"unknown marker labels {unknown}; {how}. Layout names: {', '.join(MARKER_NAMES)}",
+                path=path,
+                labels=unknown,
+            )
+        names = [n for n in out if n is not None]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise MarkerFileError(
+                f"several capture labels resolve to the same layout marker(s) {dup}", path=path
+            )
+        return out, ignored
+
+
+_MAPPING_KEYS = {"markers", "ignore", "object", "side", "units", "up"}
+
+
+def load_mapping(path: str | Path) -> MarkerMapping:
+    """Read a mapping file (JSON or two-column CSV; see the module docstring)."""
+    p = Path(path)
+    if not p.is_file():
+        raise MarkerFileError("mapping file not found", path=str(p))
+    text = p.read_text()
+    if p.suffix.lower() == ".csv":
+        markers: dict[str, str] = {}
+        ignore: list[str] = []
+        rows = [r for r in csv.reader(line for line in text.splitlines() if line.strip())]
+        if rows and [c.strip().lower() for c in rows[0][:2]] in (
+            ["capture_label", "layout_name"],
+            ["label", "name"],
+        ):
+            rows = rows[1:]
+        for i, r in enumerate(rows, start=1):
+            if not r or r[0].strip().startswith("#"):
+                continue
+            if len(r) < 1 or len(r) > 2:
+                raise MarkerFileError(
+                    f"row {i}: expected 'capture_label,layout_name', got {r}", path=str(p)
+                )
+            lab = r[0].strip()
+            tgt = r[1].strip() if len(r) == 2 else ""
+            if tgt in ("", "ignore", "-"):
+                ignore.append(lab)
+            else:
+                markers[lab] = tgt
+        return MarkerMapping(markers, tuple(ignore), source=str(p))
+    try:
+        d = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise MarkerFileError(f"not valid JSON ({e})", path=str(p)) from e
+    if not isinstance(d, dict):
+        raise MarkerFileError("a JSON mapping must be an object", path=str(p))
+    if (
+        "markers" not in d
+        and all(isinstance(v, str) for v in d.values())
+        and not (set(d) & _MAPPING_KEYS)
+    ):
+        d = {"markers": d}
+    unknown = sorted(set(d) - _MAPPING_KEYS)
+    if unknown:
+        raise MarkerFileError(
+            f"unknown keys {unknown}; a mapping has {', '.join(sorted(_MAPPING_KEYS))}",
+            path=str(p),
+        )
+    markers = d.get("markers", {})
+    ignore = d.get("ignore", [])
+    if not isinstance(markers, dict) or not all(
+        isinstance(k, str) and isinstance(v, str) for k, v in markers.items()
+    ):
+        raise MarkerFileError('"markers" must map label strings to layout names', path=str(p))
+    if not isinstance(ignore, list) or not all(isinstance(v, str) for v in ignore):
+        raise MarkerFileError('"ignore" must be a list of labels', path=str(p))
+    return MarkerMapping(
+        {k.strip(): v.strip() for k, v in markers.items()},
+        tuple(v.strip() for v in ignore),
+        object_id=d.get("object"),
+        side=d.get("side"),
+        units=d.get("units"),
+        up=d.get("up"),
+        source=str(p),
+    )
+
+
+def _assemble(
+    labels: list[str],
+    positions: np.ndarray,
+    fps: float,
+    timestamp: np.ndarray | None,
+    unit_m: float,
+    mapping: MarkerMapping | None,
+    path: str,
+    *,
+    up: str,
+    origin_m: Any,
+    object_id: str | None,
+    side: str | None,
+) -> MarkerStream:
+    mapping = mapping or MarkerMapping()
+    names, ignored = mapping.resolve(labels, path)
+    keep = [i for i, n in enumerate(names) if n is not None]
+    if not keep:
+        raise MarkerFileError("no marker of the file maps to the layout", path=path)
+    up = mapping.up or up
+    if up not in ("y", "z"):
+        raise ValidationError(f"up must be 'y' or 'z', got {up!r}", field="up")
+    maker = MocapFrame.y_up if up == "y" else MocapFrame.z_up
+    base = maker("mm", origin_m)
+    frame = MocapFrame(base.R_world_mocap, base.t_world_mocap_m, unit_m, name=f"{up}_up")
+    if ignored:
+        log.info("%s: ignoring %d labels listed in the mapping: %s", path, len(ignored), ignored)
+    return MarkerStream(
+        labels=tuple(names[i] for i in keep),  # type: ignore[misc]
+        positions=positions[:, keep],
+        fps=fps,
+        frame=frame,
+        timestamp=timestamp,
+        object_id=object_id or mapping.object_id,
+        side=side or mapping.side or "right",
+        source=path,
+        ignored_labels=tuple(ignored),
+    )
+
+
+def _unit_m(unit: str | None, path: str) -> float:
+    key = (unit or "mm").strip().lower()
+    if key not in UNITS_M:
+        raise MarkerFileError(
+            f"unknown length unit {unit!r}; expected one of {', '.join(UNITS_M)}", path=path
+        )
+    return UNITS_M[key]
+
+
+def read_c3d(
+    path: str | Path,
+    mapping: MarkerMapping | None = None,
+    *,
+    fps: float | None = None,
+    units: str | None = None,
+    up: str = "y",
+    origin_m: Any = (0.0, 0.0, 0.0),
+    object_id: str | None = None,
+    side: str | None = None,
+) -> MarkerStream:
+    """Read a C3D file's labelled points into a :class:`MarkerStream`."""
+    try:
+        import ezc3d
+    except ImportError as e:
+        raise MissingDependencyError("ezc3d", "reading C3D files") from e
+    p = Path(path)
+    if not p.is_file():
+        raise MarkerFileError("file not found", path=str(p))
+    try:
+        c = ezc3d.c3d(str(p))
+    except Exception as e:  # ezc3d raises plain RuntimeError/IOError subclasses
+        raise MarkerFileError(f"cannot read C3D ({e})", path=str(p)) from e
+    point = c["parameters"]["POINT"]
+    labels: list[str] = list(point["LABELS"]["value"])
+    k = 2
+    while f"LABELS{k}" in point:
+        labels.extend(point[f"LABELS{k}"]["value"])
+        k += 1
+    pts = np.asarray(c["data"]["points"], dtype=np.float64)  # (4, M, T)
+    labels = labels[: pts.shape[1]]
+    if len(labels) < pts.shape[1]:
+        raise MarkerFileError(
+            f"{pts.shape[1]} points but only {len(labels)} labels in POINT:LABELS", path=str(p)
+        )
+    positions = np.transpose(pts[:3], (2, 1, 0)).copy()  # (T, M, 3)
+    rate = float(np.asarray(point["RATE"]["value"]).reshape(-1)[0]) if "RATE" in point else 0.0
+    rate = float(fps) if fps else rate
+    if not (math.isfinite(rate) and rate > 0):
+        raise MarkerFileError("C3D has no POINT:RATE; pass fps", path=str(p))
+    unit_vals = list(point["UNITS"]["value"]) if "UNITS" in point else []
+    file_unit = units or (mapping and mapping.units) or (unit_vals[0] if unit_vals else "") or "mm"
+    return _assemble(
+        labels,
+        positions,
+        rate,
+        None,
+        _unit_m(str(file_unit), str(p)),
+        mapping,
+        str(p),
+        up=up,
+        origin_m=origin_m,
+        object_id=object_id,
+        side=side,
+    )
+
+
+_META = re.compile(r"#\s*(units?|fps|rate)\s*[:=]\s*(\S+)", re.IGNORECASE)
+
+
+def _parse_float(cell: str, row: int, col: str, path: str) -> float:
+    s = cell.strip()
+    if s == "" or s.lower() == "nan":
+        return math.nan
+    try:
+        return float(s)
+    except ValueError:
+        raise MarkerFileError(
+            f"row {row}, column {col!r}: {cell!r} is not a number", path=path
+        ) from None
+
+
+def read_csv(
+    path: str | Path,
+    mapping: MarkerMapping | None = None,
+    *,
+    fps: float | None = None,
+    units: str | None = None,
+    up: str = "y",
+    origin_m: Any = (0.0, 0.0, 0.0),
+    object_id: str | None = None,
+    side: str | None = None,
+) -> MarkerStream:
+    """Read a wide or long marker CSV (see the module docstring) into a :class:`MarkerStream`."""
+    p = Path(path)
+    if not p.is_file():
+        raise MarkerFileError("file not found", path=str(p))
+    lines = p.read_text().splitlines()
+    meta: dict[str, str] = {}
+    body = []
+    for line in lines:
+        s = line.strip()
+        if not s:
+            continue
+        if s.startswith("#"):
+            m = _META.match(s)
+            if m:
+                key = m.group(1).lower()
+                meta["unit" if key.startswith("unit") else key] = m.group(2)
+            continue
+        body.append(line)
+    if not body:
+        raise MarkerFileError("no header row", path=str(p))
+    rows = list(csv.reader(body))
+    header = [h.strip() for h in rows[0]]
+    data = rows[1:]
+    low = [h.lower() for h in header]
+    file_unit = units or (mapping.units if mapping else None) or meta.get("unit") or "mm"
+    rate = (
+        fps
+        or (float(meta["fps"]) if "fps" in meta else None)
+        or (float(meta["rate"]) if "rate" in meta else None)
+    )
+    if "label" in low or "marker" in low:
+        labels, pos, t = _csv_long(header, data, str(p))
+    else:
+        labels, pos, t = _csv_wide(header, data, str(p))
+    if t is not None and np.isfinite(t).all() and len(t) > 1:
+        if np.any(np.diff(t) <= 0):
+            raise MarkerFileError("the time column is not strictly increasing", path=str(p))
+        if rate is None:
+            rate = 1.0 / float(np.median(np.diff(t)))
+    else:
+        t = None
+    if not rate:
+        raise MarkerFileError(
+            "the frame rate is unknown: add a time column or a '# fps: N' line, or pass fps",
+            path=str(p),
+        )
+    return _assemble(
+        labels,
+        pos,
+        float(rate),
+        t,
+        _unit_m(file_unit, str(p)),
+        mapping,
+        str(p),
+        up=up,
+        origin_m=origin_m,
+        object_id=object_id,
+        side=side,
+    )
+
+
+def _csv_wide(header: list[str], data: list[list[str]], path: str):
+    low = [h.lower() for h in header]
+    time_col = low.index("time") if "time" in low else None
+    frame_col = low.index("frame") if "frame" in low else None
+    labels: list[str] = []
+    cols: list[tuple[int, int, int]] = []
+    by_label: dict[str, dict[str, int]] = {}
+    order: list[str] = []
+    for i, h in enumerate(header):
+        if i in (time_col, frame_col):
+            continue
+        m = re.match(r"^(.*?)[_.:]?([xyzXYZ])$", h)
+        if not m or not m.group(1):
+            raise MarkerFileError(
+                f"column {h!r} is neither frame/time nor '<label>_x|_y|_z'; for a long CSV use "
+                "columns frame,label,x,y,z",
+                path=path,
+            )
+        lab, ax = m.group(1).rstrip("_.:"), m.group(2).lower()
+        if lab not in by_label:
+            by_label[lab] = {}
+            order.append(lab)
+        if ax in by_label[lab]:
+            raise MarkerFileError(f"column {h!r} repeats {lab}_{ax}", path=path)
+        by_label[lab][ax] = i
+    for lab in order:
+        axes = by_label[lab]
+        if set(axes) != {"x", "y", "z"}:
+            raise MarkerFileError(
+                f"marker {lab!r} lacks column(s) {sorted({'x', 'y', 'z'} - set(axes))}", path=path
+            )
+        labels.append(lab)
+        cols.append((axes["x"], axes["y"], axes["z"]))
+    T = len(data)
+    pos = np.full((T, len(labels), 3), np.nan)
+    t = np.full(T, np.nan) if time_col is not None else None
+    for r, row in enumerate(data):
+        if len(row) != len(header):
+            raise MarkerFileError(
+                f"row {r + 2} has {len(row)} cells, the header has {len(header)}", path=path
+            )
+        for k, (cx, cy, cz) in enumerate(cols):
+            for d, c in enumerate((cx, cy, cz)):
+                pos[r, k, d] = _parse_float(row[c], r + 2, header[c], path)
+        if t is not None:
+            t[r] = _parse_float(row[time_col], r + 2, "time", path)
+    if frame_col is not None and T:
+        frames = [_parse_float(row[frame_col], i + 2, "frame", path) for i, row in enumerate(data)]
+        if any(np.diff(frames) <= 0):
+            raise MarkerFileError("the frame column is not strictly increasing", path=path)
+    if T == 0:
+        raise MarkerFileError("no data rows", path=path)
+    return labels, pos, t
+
+
+def _csv_long(header: list[str], data: list[list[str]], path: str):
+    low = [h.lower() for h in header]
+    lab_col = low.index("label") if "label" in low else low.index("marker")
+    need = [c for c in ("frame", "x", "y", "z") if c not in low]
+    if need:
+        raise MarkerFileError(f"long CSV lacks column(s) {need}", path=path)
+    fc, xc, yc, zc = (low.index(c) for c in ("frame", "x", "y", "z"))
+    tc = low.index("time") if "time" in low else None
+    frames: list[int] = []
+    labs: list[str] = []
+    vals: list[tuple[float, float, float]] = []
+    times: dict[int, float] = {}
+    for r, row in enumerate(data):
+        if len(row) != len(header):
+            raise MarkerFileError(
+                f"row {r + 2} has {len(row)} cells, the header has {len(header)}", path=path
+            )
+        f = _parse_float(row[fc], r + 2, "frame", path)
+        if not math.isfinite(f) or f != int(f) or f < 0:
+            raise MarkerFileError(f"row {r + 2}: frame {row[fc]!r} is not an index", path=path)
+        frames.append(int(f))
+        labs.append(row[lab_col].strip())
+        vals.append(tuple(_parse_float(row[c], r + 2, header[c], path) for c in (xc, yc, zc)))
+        if tc is not None:
+            times[int(f)] = _parse_float(row[tc], r + 2, "time", path)
+    if not frames:
+        raise MarkerFileError("no data rows", path=path)
+    labels = list(dict.fromkeys(labs))
+    f0 = min(frames)
+    T = max(frames) - f0 + 1
+    pos = np.full((T, len(labels), 3), np.nan)
+    li = {lab: i for i, lab in enumerate(labels)}
+    seen = set()
+    for f, lab, v in zip(frames, labs, vals, strict=True):
+        key = (f, lab)
+        if key in seen:
+            raise MarkerFileError(f"frame {f} lists marker {lab!r} twice", path=path)
+        seen.add(key)
+        pos[f - f0, li[lab]] = v
+    t = None
+    if tc is not None:
+        t = np.full(T, np.nan)
+        for f, v in times.items():
+            t[f - f0] = v
+    return labels, pos, t
+
+
+def detect_format(path: str | Path) -> str:
+    """``'c3d'`` or ``'csv'`` from the file extension."""
+    ext = Path(path).suffix.lower().lstrip(".")
+    if ext in FORMATS:
+        return ext
+    raise MarkerFileError(
+        f"cannot tell the format from the extension {ext!r}; pass format='c3d' or 'csv'",
+        path=str(path),
+    )
+
+
+def read_markers(
+    path: str | Path,
+    *,
+    format: str = "auto",
+    mapping: str | Path | MarkerMapping | None = None,
+    **kwargs: Any,
+) -> MarkerStream:
+    """Read a C3D or CSV marker file (``format="auto"``: from the extension).
+
+    Keyword arguments (``fps``, ``units``, ``up``, ``origin_m``, ``object_id``, ``side``) override
+    what the file and the mapping say.
+    """
+    fmt = detect_format(path) if format == "auto" else format
+    if fmt not in FORMATS:
+        raise MarkerFileError(f"unknown format {fmt!r}; expected auto, {', '.join(FORMATS)}")
+    m = load_mapping(mapping) if isinstance(mapping, str | Path) else mapping
+    reader = read_c3d if fmt == "c3d" else read_csv
+    return reader(path, m, **kwargs)
