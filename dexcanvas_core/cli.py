@@ -140,6 +140,24 @@ def run_example(cfg: ExampleConfig) -> Path:
     return out
 
 
+def run_demos_build_command(args: argparse.Namespace) -> int:
+    """``dexcanvas demos build``: generate demonstrations; returns the number that failed."""
+    from dexcanvas_core.demos import BuildConfig, run_build
+
+    cfg = BuildConfig(
+        out=args.out,
+        pairs=tuple(args.pairs) if args.pairs else None,
+        reps=args.reps,
+        seed=args.seed,
+        overwrite=args.overwrite,
+        workers=args.workers,
+    )
+    report = run_build(cfg, progress=True)
+    for line in report.lines():
+        print(line)
+    return len(report.failed)
+
+
 def run_fit_command(args: argparse.Namespace) -> dict:
     """``dexcanvas fit``: markers → MANO + object poses dataset with per-frame quality flags."""
     from rich.console import Console
@@ -194,6 +212,18 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--types", nargs="*", default=[], help="manipulation types (names or codes)")
     s.add_argument("--operators", nargs="*", default=[])
 
+    s = sub.add_parser("demos", help="generated human demonstrations")
+    demos_sub = s.add_subparsers(dest="demos_command", required=True, metavar="SUBCOMMAND")
+    b = demos_sub.add_parser("build", help="generate demonstrations into a Lance dataset")
+    b.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
+    b.add_argument(
+        "--pairs", nargs="*", default=None, help="OBJECT/TYPE pairs (default: every feasible pair)"
+    )
+    b.add_argument("--reps", type=int, default=1, help="demonstrations per pair")
+    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--workers", type=int, default=1, help="generator processes")
+    b.add_argument("--overwrite", action="store_true")
+
     s = sub.add_parser("fit", help="fit MANO hand + object poses to mocap markers (C3D or CSV)")
     s.add_argument("markers", type=Path, help="marker file (.c3d or .csv)")
     s.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
@@ -227,9 +257,16 @@ def main(argv: list[str] | None = None) -> int:
             return 1 if run_validate(ValidateConfig(args.path)) else 0
         elif args.command == "export":
             run_export(
-                ExportConfig(args.path, args.out, tuple(args.objects), tuple(args.types),
-                             tuple(args.operators))
-            )  # fmt: skip
+                ExportConfig(
+                    args.path,
+                    args.out,
+                    tuple(args.objects),
+                    tuple(args.types),
+                    tuple(args.operators),
+                )
+            )
+        elif args.command == "demos":
+            return 1 if run_demos_build_command(args) else 0
         elif args.command == "fit":
             run_fit_command(args)
         elif args.command == "example":

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
+import pinocchio as pin
 import pytest
 
 from dexcanvas_core.demos.geometry import object_geometry
@@ -13,8 +14,6 @@ from retarget.baselines.dex_retargeting import export_urdf, model_couplings
 from retarget.errors import RetargetError
 from retarget.hands import available_hands, get_hand
 from retarget.retargeter import Retargeter
-
-pin = pytest.importorskip("pinocchio")
 
 # Exercises what the exporter must get right beyond the real hands: a body with several joints
 # whose hinge anchors are off the body origin, a rotated body at a 90° pitch (gimbal lock of
@@ -131,7 +130,8 @@ def test_export_refuses_ball_joint(tmp_path):
 @pytest.fixture(scope="module")
 def demo():
     """A short scripted cube2/tripod demonstration (fingers closing on the cube, lift)."""
-    pytest.importorskip("dex_retargeting")
+    import dex_retargeting  # noqa: F401  (the bench extra, installed by scripts/setup.sh)
+
     traj = next(t for t in example_trajectories(seed=0) if t.scene == "cube2")
     return traj.slice(110, 170)
 

@@ -199,9 +199,8 @@ def test_round_trip_noise0_recovers_keypoints_and_object(demo, clean_fit):
 
 
 def test_round_trip_noise0_on_a_generated_demonstration():
-    demos = pytest.importorskip("dexcanvas_core.demos")
-    if not hasattr(demos, "generate_demo"):
-        pytest.skip("dexcanvas_core.demos has no generate_demo")
+    from dexcanvas_core import demos
+
     traj = demos.generate_demo("cube2/tripod", "operator2", seed=1).trajectory
     stream = render_markers(traj, noise_mm=0.0, dropout=0.0, gap_rate=0.0, swap_rate=0.0)
     fit = fit_markers(stream)
@@ -312,7 +311,8 @@ def test_csv_round_trip_wide_and_long(demo, tmp_path):
 
 
 def test_c3d_round_trip_with_mapping_file(demo, tmp_path):
-    ezc3d = pytest.importorskip("ezc3d")
+    import ezc3d
+
     stream = render_markers(demo.slice(0, 40), noise_mm=0.5, dropout=0.1, seed=3)
     capture = [f"Subj:{n.upper()}" for n in stream.labels] + ["Subj:LASI"]
     c = ezc3d.c3d()

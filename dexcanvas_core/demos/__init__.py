@@ -1,0 +1,85 @@
+"""Generated hand–object demonstrations for every feasible (object, manipulation type) pair.
+
+The pipeline, one module per concept:
+
+* ``geometry`` — objects as unions of primitives with a signed distance (:func:`object_geometry`);
+* ``feasibility`` — which pairs a human hand can perform, and why (:func:`feasibility_table`);
+* ``operators`` — five hand sizes (:data:`OPERATORS`);
+* ``hand`` — batched MANO-skeleton kinematics and the capsule collision model;
+* ``grasp`` — grasp synthesis by optimisation on the skeleton (:func:`solve_grasp`);
+* ``motions`` — minimum-jerk scripts: pick-and-place, rolling, sliding, rotation, transfer;
+* ``checks`` — plausibility checks of a trajectory (:func:`check_trajectory`);
+* ``demo`` — one checked demonstration (:func:`generate_demo`);
+* ``build`` — datasets and the built-in set (:func:`build_demos`, :func:`run_build`).
+
+>>> from dexcanvas_core.demos import generate_demo
+>>> demo = generate_demo("cube2/tripod", "operator2", seed=1)  # doctest: +SKIP
+>>> demo.report.passed, demo.trajectory.fps  # doctest: +SKIP
+(True, 120.0)
+"""
+
+from dexcanvas_core.demos.build import (
+    BuildConfig,
+    BuildReport,
+    DemoRecord,
+    build_builtin,
+    build_demos,
+    builtin_pairs,
+    report_path,
+    run_build,
+)
+from dexcanvas_core.demos.checks import (
+    CheckLimits,
+    CheckResult,
+    ContactInterval,
+    PlausibilityReport,
+    check_trajectory,
+)
+from dexcanvas_core.demos.demo import DEMOS_VERSION, Demo, DemoError, generate_demo
+from dexcanvas_core.demos.feasibility import (
+    Feasibility,
+    feasibility,
+    feasibility_table,
+    feasible_pairs,
+)
+from dexcanvas_core.demos.geometry import ObjectGeometry, Primitive, object_geometry
+from dexcanvas_core.demos.grasp import GRASP_SPECS, Grasp, GraspSpec, solve_grasp
+from dexcanvas_core.demos.hand import CAPSULES, HandModel, hand_model
+from dexcanvas_core.demos.operators import OPERATORS, Operator, operator
+
+__all__ = [
+    "CAPSULES",
+    "DEMOS_VERSION",
+    "GRASP_SPECS",
+    "OPERATORS",
+    "BuildConfig",
+    "BuildReport",
+    "CheckLimits",
+    "CheckResult",
+    "ContactInterval",
+    "Demo",
+    "DemoError",
+    "DemoRecord",
+    "Feasibility",
+    "Grasp",
+    "GraspSpec",
+    "HandModel",
+    "ObjectGeometry",
+    "Operator",
+    "PlausibilityReport",
+    "Primitive",
+    "build_builtin",
+    "build_demos",
+    "builtin_pairs",
+    "check_trajectory",
+    "feasibility",
+    "feasibility_table",
+    "feasible_pairs",
+    "generate_demo",
+    "hand_model",
+    "object_geometry",
+    "operator",
+    "report_path",
+    "run_build",
+    "solve_grasp",
+]

@@ -1,0 +1,382 @@
+"""Building demonstration datasets: many pairs × operators × seeds → a checked Lance dataset.
+
+``build_demos`` generates the demonstrations one by one, streams those that pass every
+plausibility check into a DexCanvas-layout Lance dataset (``io.write_dataset``) and returns a
+:class:`BuildReport` with every demonstration's checks and the pairs that failed, with the
+reason. ``run_build(BuildConfig(...))`` is what ``dexcanvas demos build`` calls; it also writes
+the report as JSON next to the dataset (``<out>.report.json``).
+
+The **built-in set** (``builtin_pairs``) is a documented subset of the feasible pairs, small
+enough to build in well under a minute on two CPU cores the first time ``DexCanvasDataset()``
+needs it: every manipulation type with up to three objects, chosen so that every light
+object of the catalogue appears (heavy variants share their light base's geometry and are left
+out), operators cycling through the five hand sizes. Pairs that fail the checks are left out of
+the dataset and listed in the report.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from dexcanvas_core.demos.demo import Demo, DemoError, generate_demo
+from dexcanvas_core.demos.feasibility import feasibility, feasible_pairs
+from dexcanvas_core.demos.operators import OPERATORS
+from dexcanvas_core.errors import DatasetError, ValidationError
+from dexcanvas_core.taxonomy import MANIPULATION_TYPES, Pair
+
+log = logging.getLogger(__name__)
+
+BUILTIN_PER_TYPE = 3
+
+FEATURED_PAIRS: tuple[str, ...] = ("cube2/tripod", "sphere1/sphere_4_finger")
+"""Pairs the built-in set always contains: the README's main job (``retarget run --hand shadow
+--pair cube2/tripod``) and the demonstrations the documentation uses."""
+"""Objects per manipulation type in the built-in set."""
+
+
+@dataclass(frozen=True)
+class BuildConfig:
+    """What ``dexcanvas demos build`` builds."""
+
+    out: Path
+    """Destination Lance dataset (a directory, conventionally ``*.lance``)."""
+    pairs: tuple[str, ...] | None = None
+    """Pairs ``object/manipulation_type``; ``None`` = every feasible pair of the catalogue."""
+    reps: int = 1
+    """Demonstrations per pair (seeds ``seed … seed + reps - 1``, operators cycling), ≥ 1."""
+    seed: int = 0
+    """First seed (object pose, posture variation, timing), ≥ 0."""
+    overwrite: bool = False
+    """Replace an existing dataset at ``out``."""
+    workers: int = 1
+    """Processes generating demonstrations, ≥ 1 (the output does not depend on it)."""
+
+    def validate(self) -> BuildConfig:
+        """Check the fields and parse the pairs (unknown names list close matches)."""
+        if not isinstance(self.reps, int) or self.reps < 1:
+            raise ValidationError(f"reps must be an integer ≥ 1, got {self.reps!r}", field="reps")
+        if not isinstance(self.workers, int) or self.workers < 1:
+            raise ValidationError(
+                f"workers must be an integer ≥ 1, got {self.workers!r}", field="workers"
+            )
+        if not isinstance(self.seed, int) or self.seed < 0:
+            raise ValidationError(f"seed must be an integer ≥ 0, got {self.seed!r}", field="seed")
+        if self.pairs is not None:
+            if not self.pairs:
+                raise ValidationError("pairs is empty; give at least one or None for all")
+            for p in self.pairs:
+                Pair.parse(p)  # raises UnknownNameError / ValidationError with suggestions
+        out = Path(self.out).expanduser()
+        if out.exists() and not self.overwrite:
+            raise DatasetError(
+                "already exists; pass overwrite=True (--overwrite) to replace it", dataset=str(out)
+            )
+        return self
+
+
+@dataclass
+class DemoRecord:
+    """One generated demonstration in a build report."""
+
+    pair: str
+    operator: str
+    seed: int
+    uuid: str
+    passed: bool
+    frames: int
+    seconds: float
+    summary: str
+    checks: dict = field(default_factory=dict)
+    grasp: dict = field(default_factory=dict)
+    notes: dict = field(default_factory=dict)
+
+
+@dataclass
+class BuildReport:
+    """What a build produced: per-demonstration checks, failures and skipped pairs."""
+
+    out: Path
+    demos: list[DemoRecord] = field(default_factory=list)
+    failed: dict[str, str] = field(default_factory=dict)
+    """Pair → why its demonstrations were left out (failed checks or generation errors)."""
+    skipped: dict[str, str] = field(default_factory=dict)
+    """Requested pairs that are not feasible → the feasibility table's reason."""
+    written: int = 0
+    seconds: float = 0.0
+
+    @property
+    def passed(self) -> int:
+        return sum(d.passed for d in self.demos)
+
+    @property
+    def all_passed(self) -> bool:
+        return bool(self.demos) and all(d.passed for d in self.demos)
+
+    def to_dict(self) -> dict:
+        return {
+            "out": str(self.out),
+            "written": self.written,
+            "generated": len(self.demos),
+            "passed": self.passed,
+            "seconds": round(self.seconds, 2),
+            "failed_pairs": dict(self.failed),
+            "skipped_pairs": dict(self.skipped),
+            "demos": [asdict(d) for d in self.demos],
+        }
+
+    def write_json(self, path: str | os.PathLike | None = None) -> Path:
+        """Write the report as JSON (default: ``<out>.report.json`` next to the dataset)."""
+        dest = Path(path) if path is not None else report_path(self.out)
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        dest.write_text(json.dumps(self.to_dict(), indent=2, default=_json_default))
+        return dest
+
+    def lines(self) -> list[str]:
+        """A short human-readable summary (the CLI prints it)."""
+        out = [
+            f"{self.written} demonstrations written to {self.out} "
+            f"({self.passed}/{len(self.demos)} passed the checks, {self.seconds:.1f} s)"
+        ]
+        out += [f"failed {p}: {why}" for p, why in self.failed.items()]
+        out += [f"skipped {p}: {why}" for p, why in self.skipped.items()]
+        return out
+
+
+def report_path(out: str | os.PathLike) -> Path:
+    """Where a build's JSON report goes: next to the dataset, ``<out>.report.json``."""
+    out = Path(out).expanduser()
+    return out.with_name(out.name + ".report.json")
+
+
+def _json_default(v):
+    if hasattr(v, "tolist"):
+        return v.tolist()
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return str(v)
+
+
+def _record(demo: Demo) -> DemoRecord:
+    checks = {
+        n: {"passed": c.passed, "value": c.value, "limit": c.limit, "unit": c.unit}
+        for n, c in demo.report.checks.items()
+    }
+    g = demo.grasp
+    return DemoRecord(
+        pair=str(demo.pair),
+        operator=demo.operator,
+        seed=demo.seed,
+        uuid=demo.trajectory.uuid,
+        passed=demo.passed,
+        frames=demo.trajectory.num_frames,
+        seconds=round(demo.seconds, 3),
+        summary=demo.report.summary(),
+        checks=checks,
+        grasp={
+            "ok": g.ok,
+            "reason": g.reason,
+            "contact_mm": [round(float(x) * 1e3, 3) for x in g.distance_m],
+            "closure": round(g.closure, 3),
+            "seconds": round(g.seconds, 3),
+        },
+        notes=dict(demo.notes),
+    )
+
+
+def builtin_pairs(per_type: int = BUILTIN_PER_TYPE) -> list[Pair]:
+    """The built-in set's pairs (deterministic): every light object once, on the type where
+    it is feasible that has the fewest pairs so far; then every type filled up to
+    ``per_type`` objects, objects used least first (catalogue order breaks ties)."""
+    light = [p for p in feasible_pairs() if not p.object.heavy]
+    by_type: dict[str, list[Pair]] = {t: [] for t in MANIPULATION_TYPES}
+    for p in light:
+        by_type[p.manipulation_type.name].append(p)
+    chosen: dict[str, list[Pair]] = {t: [] for t in MANIPULATION_TYPES}
+    uses: dict[str, int] = {}
+    types = list(MANIPULATION_TYPES)
+    for name in FEATURED_PAIRS:
+        p = Pair.parse(name)
+        if p in light:
+            chosen[p.manipulation_type.name].append(p)
+            uses[p.object.id] = uses.get(p.object.id, 0) + 1
+    for oid in dict.fromkeys(p.object.id for p in light):
+        options = [p for p in light if p.object.id == oid]
+        options = [p for p in options if len(chosen[p.manipulation_type.name]) < per_type]
+        if not options:
+            continue
+        p = min(options, key=lambda p: (len(chosen[p.manipulation_type.name]),
+                                        types.index(p.manipulation_type.name)))  # fmt: skip
+        chosen[p.manipulation_type.name].append(p)
+        uses[oid] = uses.get(oid, 0) + 1
+    for t in types:
+        cands = [p for p in by_type[t] if p not in chosen[t]]
+        while len(chosen[t]) < per_type and cands:
+            p = min(cands, key=lambda p: (uses.get(p.object.id, 0), cands.index(p)))
+            cands.remove(p)
+            chosen[t].append(p)
+            uses[p.object.id] = uses.get(p.object.id, 0) + 1
+    return [p for t in types for p in sorted(chosen[t], key=light.index)]
+
+
+def _plan(pairs: Sequence[Pair], reps: int, seed: int) -> list[tuple[Pair, str, int]]:
+    ops = list(OPERATORS)
+    return [
+        (p, ops[(i + r) % len(ops)], seed + r) for i, p in enumerate(pairs) for r in range(reps)
+    ]
+
+
+def _generate_one(item: tuple[Pair, str, int]) -> tuple[Demo | None, str]:
+    p, op, s = item
+    try:
+        return generate_demo(p, op, s), ""
+    except DemoError as e:
+        return None, str(e)
+
+
+def _run_plan(plan: list[tuple[Pair, str, int]], workers: int) -> Iterator:
+    """``(demo or None, error)`` per planned item, in plan order."""
+    if workers <= 1 or len(plan) < 2:
+        yield from map(_generate_one, plan)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    ctx = multiprocessing.get_context("spawn")  # Lance and torch are not fork-safe
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        yield from pool.map(_generate_one, plan, chunksize=1)
+
+
+def build_demos(
+    out: str | os.PathLike,
+    pairs: Sequence[str | Pair] | None = None,
+    reps: int = 1,
+    seed: int = 0,
+    overwrite: bool = False,
+    progress: bool = False,
+    workers: int = 1,
+) -> BuildReport:
+    """Generate demonstrations and write those that pass the checks as a Lance dataset.
+
+    Args:
+        out: destination dataset directory.
+        pairs: pairs to build (``"cube2/tripod"`` or :class:`Pair`); ``None`` = every
+            feasible pair. Infeasible ones are skipped with the table's reason.
+        reps: demonstrations per pair (seeds ``seed + r``; operators cycle over pairs and reps).
+        seed: first seed.
+        overwrite: replace an existing dataset.
+        progress: show a progress bar (rich).
+        workers: processes generating demonstrations (the output does not depend on it).
+
+    Returns:
+        The :class:`BuildReport` (not yet written to disk; see ``run_build``).
+
+    Raises:
+        DemoError: every requested pair is infeasible, or no demonstration passed the checks
+            (nothing to write).
+        DatasetError: ``out`` exists and ``overwrite`` is false.
+        ValidationError: ``reps`` < 1 or ``seed`` < 0.
+    """
+    t0 = time.perf_counter()
+    out = Path(out).expanduser()
+    if isinstance(reps, bool) or not isinstance(reps, int) or reps < 1:
+        raise ValidationError(f"reps must be an integer ≥ 1, got {reps!r}", field="reps")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValidationError(f"seed must be an integer ≥ 0, got {seed!r}", field="seed")
+    if out.exists() and not overwrite:
+        raise DatasetError("already exists; pass overwrite=True to replace it", dataset=str(out))
+    report = BuildReport(out=out)
+    selected: list[Pair] = []
+    for item in pairs if pairs is not None else feasible_pairs():
+        p = item if isinstance(item, Pair) else Pair.parse(item)
+        f = feasibility(p)
+        if not f.feasible:
+            report.skipped[str(p)] = f.reason
+            log.warning("skipping %s: %s", p, f.reason)
+        elif p not in selected:
+            selected.append(p)
+    plan = _plan(selected, reps, seed)
+    if not plan:
+        raise DemoError(
+            "nothing to build: every requested pair is infeasible ("
+            + "; ".join(f"{k}: {v}" for k, v in report.skipped.items())
+            + ")"
+        )
+
+    def generate(advance) -> Iterator:
+        for (p, op, s), (demo, error) in zip(plan, _run_plan(plan, workers), strict=True):
+            if demo is None:
+                report.failed[str(p)] = error
+                log.warning("%s (%s, seed %d) failed: %s", p, op, s, error)
+                advance()
+                continue
+            report.demos.append(_record(demo))
+            advance()
+            if demo.passed:
+                report.written += 1
+                yield demo.trajectory
+            else:
+                why = demo.report.summary()
+                report.failed.setdefault(str(p), f"{op}, seed {s}: {why}")
+                log.warning("%s (%s, seed %d) failed its checks: %s", p, op, s, why)
+
+    from dexcanvas_core.io import write_dataset
+
+    mode = "overwrite" if overwrite else "create"
+    try:
+        if progress:
+            from rich.progress import Progress
+
+            with Progress(transient=False) as bar:
+                task = bar.add_task("building demonstrations", total=len(plan))
+                write_dataset(generate(lambda: bar.advance(task)), out, mode=mode)
+        else:
+            write_dataset(generate(lambda: None), out, mode=mode)
+    except DatasetError as e:
+        if report.written == 0 and (report.demos or report.failed):
+            raise DemoError(
+                "no demonstration passed the checks; nothing written ("
+                + "; ".join(f"{k}: {v}" for k, v in report.failed.items())
+                + ")"
+            ) from e
+        raise
+    report.seconds = time.perf_counter() - t0
+    return report
+
+
+def run_build(cfg: BuildConfig, progress: bool = True) -> BuildReport:
+    """Validate ``cfg``, build the dataset and write its JSON report next to it."""
+    cfg.validate()
+    report = build_demos(
+        cfg.out,
+        pairs=cfg.pairs,
+        reps=cfg.reps,
+        seed=cfg.seed,
+        overwrite=cfg.overwrite,
+        progress=progress,
+        workers=cfg.workers,
+    )
+    report.write_json()
+    return report
+
+
+def build_builtin(out: str | os.PathLike, progress: bool = False, workers: int = 1) -> BuildReport:
+    """Build the built-in set (``builtin_pairs``, seed 0, one demonstration each) at ``out``,
+    replacing what is there, and write its report next to it (``workers`` processes; the
+    content does not depend on it)."""
+    report = build_demos(out, pairs=builtin_pairs(), reps=1, seed=0, overwrite=True,
+                         progress=progress, workers=workers)  # fmt: skip
+    report.write_json()
+    if report.failed:
+        log.warning(
+            "built-in set: %d pairs left out: %s",
+            len(report.failed),
+            "; ".join(f"{k}: {v}" for k, v in report.failed.items()),
+        )
+    return report
