@@ -225,3 +225,25 @@ def test_cli_run_pair_missing_from_dataset(small_dataset, capsys):
     )
     assert rc == 2
     assert "no trajectory matches" in capsys.readouterr().err
+
+
+def test_keypoint_only_entry_point(demo):
+    from dexcanvas_core.keypoints import convert_keypoints
+    from dexcanvas_core.rotations import rotation_angle_between_aa
+    from retarget.keypoint_input import keypoints_to_trajectory, retarget_keypoints
+
+    kp = demo.hand.joint_pos.astype(np.float64)
+    t = keypoints_to_trajectory(convert_keypoints(kp, "mano21", "openpose21"), 120.0, "openpose21")
+    # The palm is rigid in MANO: the wrist rotation is recovered exactly.
+    assert rotation_angle_between_aa(t.hand.global_rot_aa, demo.hand.global_rot_aa).max() < 1e-4
+    np.testing.assert_allclose(t.hand.joint_pos, kp, atol=1e-6)
+    out = retarget_keypoints(get_hand("allegro"), kp[:20], 120.0)
+    assert out.q.shape[0] == 20 and np.isfinite(out.keypoint_err).all()
+    bad = kp.copy()
+    bad[3, 4, 1] = np.nan
+    from retarget.errors import RetargetError
+
+    with pytest.raises(RetargetError, match="NaN or inf \\(first at frame 3\\)"):
+        keypoints_to_trajectory(bad, 120.0)
+    with pytest.raises(RetargetError, match=r"shape \(T, 21, 3\)"):
+        keypoints_to_trajectory(kp[:, :20], 120.0)
