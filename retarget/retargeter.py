@@ -36,6 +36,7 @@ from dexcanvas_core.keypoints import FINGERS, MANO21
 from dexcanvas_core.rotations import aa_to_matrix
 from dexcanvas_core.trajectory import Trajectory
 from retarget.errors import RetargetError
+from retarget.hands.base import WRIST_SITE, wrist_qpos_from_mano
 from retarget.kinematics import MujocoKinematics, PinocchioKinematics
 from retarget.limits import CollisionLimit, CouplingLimit, JointLimit, VelocityLimit
 from retarget.objectives import (
@@ -145,8 +146,8 @@ class RobotTrajectory:
     def ms_per_frame(self) -> float:
         return 1e3 * self.solve_time_s / max(self.num_frames, 1)
 
-    def save_npz(self, path) -> None:
-        """Write every array to one ``.npz`` (atomic: temp file + rename)."""
+    def save_npz(self, path, extra: dict[str, np.ndarray] | None = None) -> None:
+        """Write every array (plus ``extra`` ones) to one ``.npz``, atomically (temp + rename)."""
         import json
         import os
         from pathlib import Path
@@ -158,6 +159,7 @@ class RobotTrajectory:
                 f,
                 q=self.q,
                 q_command=self.q_command,
+                wrist_pose=self.q[:, :6],
                 timestamp=self.timestamp,
                 joint_names=np.array(self.joint_names),
                 tip_sites=np.array(self.tip_sites),
@@ -166,7 +168,8 @@ class RobotTrajectory:
                 min_distance=self.min_distance,
                 contact_active=self.contact_active,
                 contact_err=self.contact_err,
-                meta=np.array(json.dumps({"hand": self.hand, **self.meta})),
+                meta=np.array(json.dumps({"hand": self.hand, **self.meta}, default=str)),
+                **(extra or {}),
             )
         os.replace(tmp, path)
 
@@ -205,7 +208,7 @@ class Retargeter:
         c = self.cfg
         is_tip = np.array([k.endswith("_tip") for k in self.kp_names])
         self.keypoints = KeypointObjective(self.kp_sites, np.where(is_tip, c.w_tips, c.w_joints))
-        self.wrist = WristPoseObjective(hand_wrist_site(), (c.w_wrist_pos, c.w_wrist_rot))
+        self.wrist = WristPoseObjective(WRIST_SITE, (c.w_wrist_pos, c.w_wrist_rot))
         thumb_site = self.tip_sites[0] if tip_human and tip_human[0] == "thumb" else None
         pairs = [(s, thumb_site) for s in self.tip_sites[1:]] if thumb_site else []
         # A gripper's two "fingers" both take several human fingers: no vectors among them.
@@ -334,8 +337,6 @@ class Retargeter:
         tg = self.human_targets(traj)
         T = traj.num_frames
         q = self.q_default.copy()
-        from retarget.hands.base import wrist_qpos_from_mano
-
         q[:6] = wrist_qpos_from_mano(tg["wrist_R"][0], tg["wrist_p"][0])
         Q = np.zeros((T, self.nq))
         Qc = np.zeros((T, self.nq))
@@ -472,12 +473,6 @@ class Retargeter:
             )
             q = q + dq
         return q
-
-
-def hand_wrist_site() -> str:
-    from retarget.hands.base import WRIST_SITE
-
-    return WRIST_SITE
 
 
 class _MinkSolver:

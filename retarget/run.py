@@ -157,31 +157,17 @@ def run_retarget(cfg: RunConfig) -> dict:
 
 
 def _save(out_dir: Path, robot, sim) -> None:
-    path = out_dir / "robot_trajectory.npz"
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "wb") as f:
-        np.savez_compressed(
-            f,
-            q=robot.q,
-            q_command=robot.q_command,
-            joint_names=np.array(robot.joint_names),
-            timestamp=robot.timestamp,
-            wrist_pose=robot.q[:, :6],
-            tip_sites=np.array(robot.tip_sites),
-            tip_pos_world=robot.tip_pos_world,
-            keypoint_err=robot.keypoint_err,
-            min_distance=robot.min_distance,
-            contact_active=robot.contact_active,
-            contact_err=robot.contact_err,
-            object_pos_sim=sim.object_pos_sim,
-            object_rot_sim=sim.object_rot_sim,
-            object_pos_err=sim.object_pos_err,
-            object_rot_err=sim.object_rot_err,
-            finger_force_world=sim.finger_force_world,
-            force_parts=np.array([*sim.fingers, "palm"]),
-            meta=np.array(json.dumps({"hand": robot.hand, **robot.meta}, default=str)),
-        )
-    os.replace(tmp, path)
+    robot.save_npz(
+        out_dir / "robot_trajectory.npz",
+        extra={
+            "object_pos_sim": sim.object_pos_sim,
+            "object_rot_sim": sim.object_rot_sim,
+            "object_pos_err": sim.object_pos_err,
+            "object_rot_err": sim.object_rot_err,
+            "finger_force_world": sim.finger_force_world,
+            "force_parts": np.array([*sim.fingers, "palm"]),
+        },
+    )
 
 
 class _Progress:
