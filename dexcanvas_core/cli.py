@@ -185,6 +185,60 @@ def run_fit_command(args: argparse.Namespace) -> dict:
     return d
 
 
+def _sim_config(args: argparse.Namespace):
+    from dexcanvas_core.sim.pipeline import SimConfig
+    from dexcanvas_core.sim.tracker import MPCConfig
+
+    return SimConfig(
+        tracker=args.tracker,
+        mpc=MPCConfig(samples=args.samples, seed=args.seed),
+        object_id=getattr(args, "object", None),
+    ).validate()
+
+
+def run_simulate_command(args: argparse.Namespace) -> dict:
+    """``dexcanvas simulate``: track one demonstration in physics, write contacts and forces."""
+    from dexcanvas_core.sim.run import SimulateConfig, run_simulate
+
+    return run_simulate(
+        SimulateConfig(
+            pair=args.pair,
+            out=args.out,
+            dataset=args.dataset,
+            index=args.index,
+            sim=_sim_config(args),
+            overwrite=args.overwrite,
+            plot=not args.no_plot,
+        )
+    )
+
+
+def run_synthesize_command(args: argparse.Namespace) -> dict:
+    """``dexcanvas synthesize``: perturbed re-tracking, keeping the successful rollouts."""
+    from dexcanvas_core.sim.run import SynthesizeConfig, run_synthesize
+
+    return run_synthesize(
+        SynthesizeConfig(
+            dataset=args.dataset,
+            out=args.out,
+            expand=args.expand,
+            seed=args.seed,
+            workers=args.workers,
+            sim=_sim_config(args),
+            limit=args.limit,
+            overwrite=args.overwrite,
+        )
+    )
+
+
+def _add_tracker_args(s: argparse.ArgumentParser) -> None:
+    s.add_argument("--tracker", choices=["mpc", "open_loop"], default="mpc",
+                   help="sampling MPC (default) or the reference replayed open loop")  # fmt: skip
+    s.add_argument("--samples", type=int, default=16, help="MPC samples per replan")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--overwrite", action="store_true", help="replace an existing output")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="dexcanvas",
@@ -238,6 +292,30 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--save-calibration", type=Path, default=None)
     s.add_argument("--overwrite", action="store_true")
 
+    s = sub.add_parser(
+        "simulate",
+        help="track a demonstration with the simulated MANO hand; write contacts and forces",
+    )
+    s.add_argument("--pair", required=True, help="OBJECT/TYPE, e.g. cube2/tripod")
+    s.add_argument("--dataset", type=Path, default=None, help="Lance dataset (default: built-in)")
+    s.add_argument("--index", type=int, default=0, help="which demonstration of the pair")
+    s.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
+    s.add_argument(
+        "--object", default=None, help="simulate another catalogue object (cube2h for a cube2 demo)"
+    )
+    s.add_argument("--no-plot", action="store_true", help="skip the per-finger force PNG")
+    _add_tracker_args(s)
+
+    s = sub.add_parser(
+        "synthesize", help="expand a dataset with perturbed, physically tracked rollouts"
+    )
+    s.add_argument("--dataset", type=Path, required=True, help="source Lance dataset")
+    s.add_argument("--expand", type=int, default=10, help="rollouts per source row")
+    s.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
+    s.add_argument("--workers", type=int, default=1, help="processes")
+    s.add_argument("--limit", type=int, default=None, help="only the first N source rows")
+    _add_tracker_args(s)
+
     s = sub.add_parser("example", help="write the built-in synthetic example dataset")
     s.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
     s.add_argument("--seed", type=int, default=0)
@@ -269,6 +347,11 @@ def main(argv: list[str] | None = None) -> int:
             return 1 if run_demos_build_command(args) else 0
         elif args.command == "fit":
             run_fit_command(args)
+        elif args.command == "simulate":
+            m = run_simulate_command(args)
+            return 0 if m["success"] else 1
+        elif args.command == "synthesize":
+            run_synthesize_command(args)
         elif args.command == "example":
             run_example(ExampleConfig(args.out, args.seed, args.overwrite))
     except DexCanvasError as e:

@@ -25,6 +25,7 @@ penetration check). Normals are the gradient of the minimising primitive's dista
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -290,6 +291,28 @@ class ObjectGeometry:
         T[:3, :3] = aa_to_matrix(np.array([0.0, 0.0, yaw]))
         T[:3, 3] = (x, y, self.rest_z)
         return T
+
+    def scaled(self, factor: float, mass_kg: float | None = None) -> ObjectGeometry:
+        """The same shape scaled uniformly about the object frame's origin by ``factor``.
+
+        The mass stays the catalogue mass unless ``mass_kg`` is given (size and mass are
+        perturbed separately by the synthesis stage). The id keeps the catalogue id.
+        """
+        if not (math.isfinite(factor) and factor > 0):
+            raise ValidationError(f"scale factor must be positive, got {factor!r}", field="scale")
+        prims = tuple(
+            dataclasses.replace(
+                p, size=tuple(s * factor for s in p.size), pos=tuple(v * factor for v in p.pos)
+            )
+            for p in self.primitives
+        )
+        return ObjectGeometry(
+            object_id=self.object_id,
+            primitives=prims,
+            mass_kg=self.mass_kg if mass_kg is None else float(mass_kg),
+            rest_z=self.rest_z * factor,
+            description=f"{self.description} (scaled x{factor:.3f})",
+        )
 
     def to_dict(self) -> dict:
         """A JSON-ready description (for scene builders and reports)."""

@@ -235,3 +235,27 @@ def select_rows(
         uuids=tuple(uuids_all[p] for p in positions),
         filter=filt,
     )
+
+
+def load_demonstration(pair, index: int = 0, dataset=None):
+    """The ``index``-th demonstration (0-based) of ``pair`` (``"cube2/tripod"`` or a ``Pair``)
+    in ``dataset`` (a DexCanvas-layout Lance path; ``None``: the built-in demonstrations)."""
+    from dexcanvas_core.io import open_dataset
+    from dexcanvas_core.taxonomy import Pair
+
+    pair = pair if isinstance(pair, Pair) else Pair.parse(pair)
+    if dataset is None:
+        from dexcanvas_core.builtin import default_dataset_path
+
+        dataset = default_dataset_path()
+    ds = open_dataset(dataset)
+    sel = select_rows(
+        ds, objects=[pair.object.id], manipulation_types=[pair.manipulation_type.name]
+    )
+    n = len(sel.positions)
+    if not 0 <= index < n:
+        raise DatasetError(
+            f"--index {index} out of range: the dataset has {n} demonstration(s) of {pair}",
+            dataset=str(ds.path),
+        )
+    return ds.take([int(sel.positions[index])])[0]

@@ -1,0 +1,148 @@
+"""Contact-aware grip: joint-target offsets that make position-controlled fingers press.
+
+A position-controlled finger whose target lies exactly on the object surface touches it with
+(almost) no force, so a reference replayed in physics drops what the human lifted. For every
+finger whose reference pad is near the object, the grip offsets move the finger's joint targets
+*into* the object by exactly as much as makes its actuators push with a chosen force once the
+surface stops it (the "squeeze", ``Δq = K⁻¹ Jᵀ f``):
+
+* the pad point is the point of the finger's distal capsule axis closest to the object surface,
+  ``n`` the object's outward normal there (both at the reference pose);
+* ``f_k = −n_k · w_k · F_k``. The pad forces are *internal* forces: they must not push the object
+  (the reference already moves it), so the magnitudes ``F_k ≥ 0`` minimise
+  ``‖Σ_k F_k n_k + F_palm n_palm‖² + λ Σ_k (F_k − F_hold)²`` — balanced against each other and
+  against the palm when it touches (``F_palm ≥ 0`` free: the wrist carries it) — with
+  ``F_hold = max(F_min, s · m·g / (μ · n_fingers))``, enough friction to carry ``s`` times the
+  object's weight shared by the fingers near it. ``w`` ∈ [0, 1] ramps with the pad's distance to
+  the surface (``grip_weights``) and is smoothed in time;
+* ``J`` is the pad point's translational Jacobian over that finger's hinges, ``K`` the hinges'
+  position gains: at equilibrium against the surface ``K (q_target − q) = Jᵀ f``.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from dexcanvas_core.keypoints import FINGERS
+from dexcanvas_core.sim.hand import FINGER_HINGES, HAND_JOINTS
+
+GRAVITY = 9.81
+
+
+def finger_columns() -> list[np.ndarray]:
+    """Per finger (thumb … pinky): indices into ``HAND_JOINTS`` of its hinges."""
+    return [
+        np.array([HAND_JOINTS.index(n) for n in FINGER_HINGES if n.startswith(f)]) for f in FINGERS
+    ]
+
+
+def distal_geoms(scene) -> list[int]:
+    """The distal capsule geom of each finger (thumb … pinky)."""
+    part = {"thumb": "thumb_ip", **{f: f"{f}_dip" for f in FINGERS[1:]}}
+    by_part = {p: g for g, p in scene.hand.geom_part.items()}
+    return [by_part[part[f]] for f in FINGERS]
+
+
+def squeeze_offsets(
+    scene,
+    ctrl_ref: np.ndarray,
+    object_pos: np.ndarray,
+    object_quat: np.ndarray,
+    weights: np.ndarray,
+    *,
+    force_min_n: float,
+    safety: float,
+    friction: float,
+    palm_contact_m: float = 0.01,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(T, 51)`` joint-target offsets and ``(T, 5)`` the commanded pad forces [N].
+
+    Args:
+        scene: the ``SimScene``.
+        ctrl_ref: ``(T, 51)`` reference actuator targets (the pose the pads are measured in).
+        object_pos, object_quat: ``(T, 3)``, ``(T, 4)`` reference object pose.
+        weights: ``(T, 5)`` grip weights in [0, 1] per finger.
+    """
+    m = scene.model
+    d = mujoco.MjData(m)
+    hand = scene.hand
+    geoms = distal_geoms(scene)
+    cols = finger_columns()
+    kp = m.actuator_gainprm[hand.actuator, 0]
+    mass = scene.mass_kg
+    T = ctrl_ref.shape[0]
+    out = np.zeros((T, len(HAND_JOINTS)))
+    force = np.zeros((T, len(FINGERS)))
+    jacp = np.zeros((3, m.nv))
+    s = np.linspace(0.0, 1.0, 9)
+    oa = scene.object_qpos_adr
+    palm = [g for g, p in hand.geom_part.items() if p == "palm"]
+    for t in range(T):
+        w = weights[t]
+        if not (w > 0).any():
+            continue
+        d.qpos[hand.qpos_adr] = ctrl_ref[t]
+        d.qpos[oa : oa + 3] = object_pos[t]
+        d.qpos[oa + 3 : oa + 7] = object_quat[t]
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        R_o = d.xmat[scene.object_body].reshape(3, 3)
+        p_o = d.xpos[scene.object_body]
+        n_near = max(1.0, float((w > 0.5).sum()))
+        F_hold = max(force_min_n, safety * mass * GRAVITY / (friction * n_near))
+        act = [k for k in range(len(geoms)) if w[k] > 0]
+        pts_k, n_k, J_k = [], [], []
+        for k in act:
+            g = geoms[k]
+            p, n_w = _closest_on_axis(scene, d, g, s, R_o, p_o)
+            mujoco.mj_jac(m, d, jacp, None, p, m.geom_bodyid[g])
+            pts_k.append(p)
+            n_k.append(n_w)
+            J_k.append(jacp[:, hand.dof_adr[cols[k]]].copy())
+        # the palm, if it touches: a free balancing contact
+        n_p = []
+        for g in palm:
+            p, n_w = _closest_on_axis(scene, d, g, s, R_o, p_o)
+            sd, _ = scene.geometry.sdf_and_normal(((p - p_o) @ R_o)[None])
+            if sd[0] - m.geom_size[g, 0] < palm_contact_m:
+                n_p.append(n_w)
+        F = balanced_forces(np.array(n_k), np.array(n_p).reshape(-1, 3), F_hold)
+        for i, k in enumerate(act):
+            f = -n_k[i] * w[k] * F[i]
+            out[t, cols[k]] = (J_k[i].T @ f) / kp[cols[k]]
+            force[t, k] = w[k] * F[i]
+    return out, force
+
+
+def _closest_on_axis(scene, d, g, s, R_o, p_o) -> tuple[np.ndarray, np.ndarray]:
+    """Point of capsule ``g``'s axis closest to the object surface, and the outward normal
+    there (world)."""
+    m = scene.model
+    c = d.geom_xpos[g]
+    axis = d.geom_xmat[g].reshape(3, 3)[:, 2]
+    half = m.geom_size[g, 1]
+    pts = c + np.outer((2 * s - 1) * half, axis)
+    sdf, nrm = scene.geometry.sdf_and_normal((pts - p_o) @ R_o)
+    i = int(np.argmin(sdf))
+    return pts[i], R_o @ nrm[i]
+
+
+def balanced_forces(
+    normals: np.ndarray, palm_normals: np.ndarray, F_hold: float, lam: float = 1.0
+) -> np.ndarray:
+    """Pad force magnitudes ``(k,)`` ≥ 0, near ``F_hold``, whose net force (with free,
+    non-negative palm forces along ``palm_normals``) is as small as possible (module docstring).
+    Solved as a bounded least-squares problem (``scipy.optimize.lsq_linear``)."""
+    from scipy.optimize import lsq_linear
+
+    k = normals.shape[0]
+    if k == 0:
+        return np.zeros(0)
+    N = np.concatenate([normals, palm_normals], axis=0).T  # (3, k + p)
+    p = palm_normals.shape[0]
+    reg = np.sqrt(lam) * np.concatenate([np.eye(k), np.zeros((k, p))], axis=1)
+    A = np.concatenate([N, reg], axis=0)
+    b = np.concatenate([np.zeros(3), np.sqrt(lam) * np.full(k, F_hold)])
+    sol = lsq_linear(A, b, bounds=(0.0, np.inf))
+    return sol.x[:k]

@@ -1,0 +1,238 @@
+"""``dexcanvas simulate`` and ``dexcanvas synthesize``: the force pipeline from the shell.
+
+``run_simulate`` tracks one demonstration (built-in by default) and writes a Lance dataset
+holding the annotated row (contacts, per-finger forces through the contact records, the object
+wrench, solver settings), a ``metrics.json`` and a per-finger force plot next to it.
+
+``run_synthesize`` expands a dataset: ``expand`` perturbed rollouts per source row, keeping the
+successful ones. Work is checkpointed per source row in ``<out>.work/`` (one small dataset per
+row, written atomically) so an interrupted run resumes where it stopped; the final dataset is
+assembled atomically at the end.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from dexcanvas_core.errors import DatasetError
+from dexcanvas_core.sim.pipeline import SimConfig, simulate
+
+
+def _atomic_write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+@dataclass(frozen=True)
+class SimulateConfig:
+    pair: str
+    out: Path
+    dataset: Path | None = None
+    index: int = 0
+    sim: SimConfig = field(default_factory=SimConfig)
+    overwrite: bool = False
+    progress: bool = True
+    plot: bool = True
+
+
+def _check_out(out: Path, overwrite: bool) -> None:
+    if out.exists() and not overwrite:
+        raise DatasetError(
+            f"{out} already exists; pass --overwrite to replace it", dataset=str(out)
+        )
+
+
+def run_simulate(cfg: SimulateConfig) -> dict:
+    """Track one demonstration, write the dataset, metrics and plot; return the metrics."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+    from dexcanvas_core.io import write_dataset
+    from dexcanvas_core.loaders.selection import load_demonstration
+
+    out = Path(cfg.out)
+    _check_out(out, cfg.overwrite)
+    cfg.sim.validate()
+    traj = load_demonstration(cfg.pair, cfg.index, cfg.dataset)
+    if cfg.progress:
+        with Progress(
+            "[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
+            TimeElapsedColumn(),
+        ) as bar:  # fmt: skip
+            task = bar.add_task(f"tracking {cfg.pair} ({cfg.sim.tracker})", total=traj.num_frames)
+            bar.advance(task)
+            res = simulate(traj, cfg.sim, progress=lambda n: bar.advance(task, n))
+    else:
+        res = simulate(traj, cfg.sim)
+    write_dataset([res.trajectory], out, mode="overwrite" if cfg.overwrite else "create")
+    metrics = {**res.metrics, "pair": cfg.pair, "dataset": str(cfg.dataset or "built-in")}
+    _atomic_write_text(
+        out.with_name(out.name + ".metrics.json"),
+        json.dumps(metrics, indent=2, sort_keys=True, default=float),
+    )
+    if cfg.plot:
+        from dexcanvas_core.sim.plots import plot_finger_forces
+
+        plot_finger_forces(res, out.with_name(out.name + ".forces.png"), title=cfg.pair)
+    if cfg.progress:
+        print_summary(metrics, out)
+    return metrics
+
+
+def print_summary(m: dict, out: Path) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    ok = "[green]SUCCESS[/green]" if m["success"] else "[red]FAILED[/red]"
+    t = Table(title=f"force pipeline · {m['pair']} · {ok}", show_header=False)
+    tracked = f"{m['frames_tracked']}/{m['frames']}"
+    if m["failed_at_frame"] is not None:
+        tracked += f" (object error > 5 cm at frame {m['failed_at_frame']})"
+    t.add_row("frames tracked", tracked)
+    t.add_row(
+        "object error max / mean",
+        f"{100 * m['object_pos_err_max_m']:.2f} / {100 * m['object_pos_err_mean_m']:.2f} cm, "
+        f"rotation mean {np.degrees(m['object_rot_err_mean_rad']):.1f}°",
+    )
+    t.add_row("loose rule (mean < 10 cm, < 0.5 rad)", "yes" if m["success_loose"] else "no")
+    if m["hold_weight_ratio"] is not None:
+        t.add_row(
+            "static hold",
+            f"{m['hold_frames']} frames, hand carries {100 * m['hold_weight_ratio']:.1f} % of m·g",
+        )
+        f = m["hold_finger_force_mean_n"]
+        t.add_row("mean force in hold [N]", ", ".join(f"{k} {v:.2f}" for k, v in f.items()))
+    t.add_row(
+        "Newton–Euler residual (median)",
+        f"sim {100 * m['newton_euler_sim_median']:.2f} %, vs capture "
+        f"{100 * m['newton_euler_capture_median']:.2f} % of m·g",
+    )
+    t.add_row("contact frames", str(m["contact_frames"]))
+    t.add_row("compute", f"{m['compute_s']:.1f} s ({m['compute_s_per_demo_s']:.2f} s per demo-s)")
+    t.add_row("written", f"{out} (+ .metrics.json, .forces.png)")
+    Console().print(t)
+
+
+# -- synthesis -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SynthesizeConfig:
+    dataset: Path
+    out: Path
+    expand: int = 10
+    seed: int = 0
+    workers: int = 1
+    sim: SimConfig = field(default_factory=SimConfig)
+    limit: int | None = None
+    """Only the first ``limit`` source rows (for trials)."""
+    overwrite: bool = False
+    progress: bool = True
+
+
+def _synth_row(args) -> tuple[str, int, list[dict]]:
+    """Worker: all rollouts of one source row, checkpointed as ``work/<uuid>.lance``."""
+    from dexcanvas_core.io import open_dataset, write_dataset
+    from dexcanvas_core.sim.synthesis import PerturbationRanges, synthesize_one
+
+    dataset, position, expand, seed, sim_cfg, work = args
+    traj = open_dataset(dataset).take([position])[0]
+    kept, reports = [], []
+    for i in range(expand):
+        tr, metrics = synthesize_one(traj, i, seed, sim_cfg, PerturbationRanges())
+        reports.append(metrics)
+        if tr is not None:
+            kept.append(tr)
+    part = Path(work) / f"{traj.uuid}.lance"
+    if kept:
+        write_dataset(kept, part, mode="overwrite")
+    _atomic_write_text(
+        Path(work) / f"{traj.uuid}.json", json.dumps(reports, sort_keys=True, default=float)
+    )
+    return traj.uuid, len(kept), reports
+
+
+def run_synthesize(cfg: SynthesizeConfig) -> dict:
+    """Expand ``dataset`` ``expand``× (module docstring); return a summary."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+    from dexcanvas_core.io import open_dataset, write_dataset
+
+    if cfg.expand < 1:
+        raise DatasetError("--expand must be at least 1")
+    out = Path(cfg.out)
+    _check_out(out, cfg.overwrite)
+    cfg.sim.validate()
+    src = open_dataset(cfg.dataset)
+    meta = src.scan_metadata()
+    uuids = [str(u) for u in meta.column("index").combine_chunks().field("uuid").to_pylist()]
+    positions = list(range(len(uuids)))[: cfg.limit]
+    work = out.with_name(out.name + ".work")
+    work.mkdir(parents=True, exist_ok=True)
+    settings = {"dataset": str(cfg.dataset), "expand": cfg.expand, "seed": cfg.seed,
+                "sim": cfg.sim.as_dict()}  # fmt: skip
+    stamp = work / "settings.json"
+    if stamp.exists() and json.loads(stamp.read_text()) != json.loads(json.dumps(settings)):
+        raise DatasetError(
+            f"{work} holds an interrupted run with other settings; delete it or rerun with the "
+            "same settings to resume",
+            dataset=str(work),
+        )
+    _atomic_write_text(stamp, json.dumps(settings, sort_keys=True))
+    todo = [p for p in positions if not (work / f"{uuids[p]}.json").exists()]
+    jobs = [(str(cfg.dataset), p, cfg.expand, cfg.seed, cfg.sim, str(work)) for p in todo]
+    with Progress(
+        "[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
+        TimeElapsedColumn(), disable=not cfg.progress,
+    ) as bar:  # fmt: skip
+        task = bar.add_task(
+            f"synthesizing ×{cfg.expand}",
+            total=len(positions),
+            completed=len(positions) - len(todo),
+        )
+        if cfg.workers > 1 and len(jobs) > 1:
+            with ProcessPoolExecutor(cfg.workers) as pool:
+                for _ in pool.map(_synth_row, jobs):
+                    bar.advance(task)
+        else:
+            for job in jobs:
+                _synth_row(job)
+                bar.advance(task)
+    # assemble
+    kept, reports = [], []
+    for p in positions:
+        reports += json.loads((work / f"{uuids[p]}.json").read_text())
+        part = work / f"{uuids[p]}.lance"
+        if part.exists():
+            kept += list(open_dataset(part).iter_trajectories())
+    if not kept:
+        raise DatasetError(
+            f"no rollout succeeded out of {len(reports)}; nothing to write (reports in {work})",
+            dataset=str(out),
+        )
+    write_dataset(kept, out, mode="overwrite" if cfg.overwrite else "create")
+    summary = {
+        "source_rows": len(positions),
+        "rollouts": len(reports),
+        "kept": len(kept),
+        "success_rate": len(kept) / max(1, len(reports)),
+        "out": str(out),
+    }
+    _atomic_write_text(
+        out.with_name(out.name + ".report.json"),
+        json.dumps({"summary": summary, "rollouts": reports}, indent=1, default=float),
+    )
+    shutil.rmtree(work, ignore_errors=True)
+    if cfg.progress:
+        print(
+            f"kept {len(kept)} of {len(reports)} rollouts "
+            f"({100 * summary['success_rate']:.0f} %) from {len(positions)} source rows → {out}"
+        )
+    return summary

@@ -1,0 +1,511 @@
+"""Tracking a demonstration in physics: the environment, the residual action, the trackers.
+
+The simulated hand's actuator targets are the human reference plus a *residual*:
+
+    ctrl_t = ref_t + grip_t + M · u_t,      u_t = clip(τ · u_{t-1} + a_t, -1, 1)
+
+``a_t`` (11-D: wrist x, y, z [×0.03 m], wrist Euler x, y, z [×0.15 rad], one flexion offset
+per finger [×0.4 rad, added to all flexion hinges of that finger]) is what a tracker chooses
+each data frame; ``u`` is the paper's exponentially smoothed residual. ``grip_t`` is the
+contact-aware grip bias of :mod:`dexcanvas_core.sim.grip`: fingers whose reference pad is within
+``grip_far_m`` of the object surface get joint-target offsets that press the pad into the
+surface with a force sized to carry the object, so position actuators grip instead of resting
+on it.
+
+The reward (the DexCanvas paper's) per frame is ``exp(-60·pos_err) + exp(-10·rot_err) −
+‖a‖²``; a rollout fails at the first frame whose object position error exceeds 5 cm.
+
+**Trackers** implement :class:`ResidualTracker` (``reset(env)``, ``act(env) -> a``): the
+zero-residual :class:`OpenLoop`, and :class:`SamplingMPC` (predictive sampling with a softmax
+over the best samples, parallel rollouts with ``mujoco.rollout``). A learned residual policy
+(the paper's per-pair PPO) plugs in the same way: it reads ``env.observation()`` and returns
+``a``; the scene, the reference and the force code do not change.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import mujoco
+import numpy as np
+from mujoco import rollout as mj_rollout
+
+from dexcanvas_core.errors import ValidationError
+from dexcanvas_core.keypoints import FINGERS
+from dexcanvas_core.sim.forces import (
+    FrameAccumulator,
+    FrameContacts,
+    FramePoses,
+    finish_frame,
+    read_contacts,
+)
+from dexcanvas_core.sim.grip import squeeze_offsets
+from dexcanvas_core.sim.hand import FINGER_HINGES, HAND_JOINTS
+from dexcanvas_core.sim.reference import Reference
+
+ACTION_NAMES: tuple[str, ...] = (
+    "wrist_x", "wrist_y", "wrist_z", "wrist_rx", "wrist_ry", "wrist_rz",
+    *(f"{f}_flex" for f in FINGERS),
+)  # fmt: skip
+ACTION_DIM = len(ACTION_NAMES)
+
+
+@dataclass(frozen=True)
+class TrackingConfig:
+    """The residual action, grip bias, warm-up and success rule."""
+
+    tau: float = 0.9
+    """Action smoothing ``u_t = τ·u_{t-1} + a_t`` (per data frame)."""
+    scale_pos_m: float = 0.03
+    scale_rot_rad: float = 0.15
+    scale_finger_rad: float = 0.4
+    grip: bool = True
+    """Contact-aware grip offsets (:mod:`dexcanvas_core.sim.grip`)."""
+    grip_force_min_n: float = 4.0
+    grip_safety: float = 3.0
+    """Grip force per finger: carry this many times the object's weight by friction."""
+    grip_near_m: float = 0.002
+    grip_far_m: float = 0.02
+    """The grip ramps from 0 (pad ``grip_far_m`` from the surface) to full (``grip_near_m``)."""
+    grip_smooth_s: float = 0.1
+    settle_s: float = 0.1
+    """Physics time before frame 0 with the targets of frame 0 (contacts settle)."""
+    warmup_s: float = 0.3
+    """If the object starts off the table (a clip that begins mid-grasp), it is held at its
+    first pose by a weld while the hand settles into the grasp for this long."""
+    fail_pos_m: float = 0.05
+    """Early termination: object position error above this fails the rollout [m]."""
+    reward_pos_k: float = 60.0
+    reward_rot_k: float = 10.0
+    reward_rot_w: float = 0.3
+    """Weight of the rotation term in the planning reward (the paper weighs both terms 1;
+    DESIGN.md's sources weigh position far above orientation, and so does planning here)."""
+    action_penalty: float = 1.0
+    contact_reward: float = 2.0
+    """Weight of the contact-keeping term ``mean_f w_f · exp(-k·‖tip_f − tip_f^ref‖)`` (tips in
+    the object frame, ``w_f`` the grip proximity of finger f): makes planning keep the fingers
+    the human had on the object on it, which a short horizon would otherwise trade for a
+    momentarily stiller object. Also an addition to the paper's reward."""
+    contact_k: float = 100.0
+    residual_penalty: float = 0.3
+    """Weight of ``‖u‖²`` in the planning reward (an addition to the paper's reward: keeps the
+    hand on the human reference unless leaving it helps the object)."""
+
+
+def _finger_flex_rows() -> list[list[int]]:
+    rows = []
+    for f in FINGERS:
+        names = [n for n in FINGER_HINGES if n.startswith(f) and n.endswith("_flex")]
+        rows.append([HAND_JOINTS.index(n) for n in names])
+    return rows
+
+
+def action_matrix(cfg: TrackingConfig) -> np.ndarray:
+    """``(51, 11)``: actuator-target offsets per unit of residual ``u``."""
+    M = np.zeros((len(HAND_JOINTS), ACTION_DIM))
+    for i in range(3):
+        M[i, i] = cfg.scale_pos_m
+        M[3 + i, 3 + i] = cfg.scale_rot_rad
+    for k, rows in enumerate(_finger_flex_rows()):
+        M[rows, 6 + k] = cfg.scale_finger_rad
+    return M
+
+
+def grip_weights(ref: Reference, cfg: TrackingConfig, tip_radius: np.ndarray) -> np.ndarray:
+    """``(T, 5)`` in [0, 1]: how close each reference fingertip pad is to the object surface,
+    moving-averaged over ``grip_smooth_s``."""
+    if not np.isfinite(ref.tip_distance).all():
+        return np.zeros_like(ref.tip_distance)
+    gap = ref.tip_distance - tip_radius[None, :]
+    w = np.clip((cfg.grip_far_m - gap) / (cfg.grip_far_m - cfg.grip_near_m), 0.0, 1.0)
+    n = max(1, round(cfg.grip_smooth_s * ref.fps))
+    if n > 1:
+        kernel = np.ones(n) / n
+        w = np.stack([np.convolve(np.pad(c, (n // 2, n - 1 - n // 2), mode="edge"), kernel,
+                                  mode="valid") for c in w.T], axis=1)  # fmt: skip
+    return w
+
+
+def quat_angle(q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
+    """Rotation angle [rad] between unit quaternions ``(..., 4)`` (any convention)."""
+    dot = np.abs(np.sum(q1 * q2, axis=-1))
+    return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
+
+
+class TrackingEnv:
+    """One demonstration being tracked in one scene (see the module docstring).
+
+    ``t`` is the data frame the physics state corresponds to; :meth:`step` advances one frame.
+    Everything recorded per frame (object pose, hand state, controls, contacts) is in the
+    lists of :attr:`log`.
+    """
+
+    def __init__(self, scene, ref: Reference, cfg: TrackingConfig | None = None):
+        self.scene = scene
+        self.ref = ref
+        self.cfg = TrackingConfig() if cfg is None else cfg
+        if abs(ref.fps - scene.fps) > 1e-6:
+            raise ValidationError(f"scene built for {scene.fps} fps, reference has {ref.fps}")
+        m = scene.model
+        self.M = action_matrix(self.cfg)
+        tip_geoms = [g for g, p in scene.hand.geom_part.items() if p.endswith(("_dip", "_ip"))]
+        tip_radius = np.array(
+            [
+                m.geom_size[g, 0]
+                for f in FINGERS
+                for g in tip_geoms
+                if scene.hand.geom_part[g].startswith(f)
+            ]
+        )
+        self.tip_weight = grip_weights(ref, self.cfg, tip_radius)
+        self.ctrl_ref = ref.ctrl()
+        self.grip_force = np.zeros_like(self.tip_weight)
+        if self.cfg.grip:
+            offsets, self.grip_force = squeeze_offsets(
+                scene, self.ctrl_ref, ref.object_pos, ref.object_quat, self.tip_weight,
+                force_min_n=self.cfg.grip_force_min_n, safety=self.cfg.grip_safety,
+                friction=float(m.geom_friction[scene.object_geoms, 0].max()),
+            )  # fmt: skip
+            self.ctrl_ref = self.ctrl_ref + offsets
+        if not np.isfinite(ref.tips_object).all():
+            self.tip_weight[:] = 0.0
+        self.ctrl_low = scene.hand.ctrl_low
+        self.ctrl_high = scene.hand.ctrl_high
+        self.rollout_data = mujoco.MjData(m)
+        self._state_spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        self._state = np.zeros(mujoco.mj_stateSize(m, self._state_spec))
+        self.reset()
+
+    # -- state ----------------------------------------------------------------------------
+
+    def reset(self) -> None:
+        sc, ref, cfg = self.scene, self.ref, self.cfg
+        m, d = sc.model, sc.data
+        mujoco.mj_resetData(m, d)
+        d.qpos[sc.hand.qpos_adr] = self.ctrl_ref[0]
+        a = sc.object_qpos_adr
+        d.qpos[a : a + 3] = ref.object_pos[0]
+        d.qpos[a + 3 : a + 7] = ref.object_quat[0]
+        d.ctrl[sc.hand.actuator] = self._clip(self.ctrl_ref[0])
+        mujoco.mj_forward(m, d)
+        self.u = np.zeros(ACTION_DIM)
+        self.t = 0
+        self.failed_at: int | None = None
+        self.log = TrackLog()
+        lowest = sc.geometry.lowest_z(_quat_to_R(ref.object_quat[0]), ref.object_pos[0])
+        airborne = float(lowest) > 0.005
+        n_settle = round((cfg.warmup_s if airborne else cfg.settle_s) / m.opt.timestep)
+        if airborne:
+            d.mocap_pos[sc.anchor_mocap] = ref.object_pos[0]
+            d.mocap_quat[sc.anchor_mocap] = ref.object_quat[0]
+            d.eq_active[sc.weld_eq] = 1
+        for _ in range(n_settle):
+            mujoco.mj_step(m, d)
+        d.eq_active[sc.weld_eq] = 0
+        d.qvel[sc.object_dof_adr : sc.object_dof_adr + 6] = 0.0
+        mujoco.mj_forward(m, d)
+        acc = FrameAccumulator(1)
+        acc.add(read_contacts(sc, d), d.xipos[sc.object_body].copy())
+        self._record(finish_frame(acc), self.ctrl_ref[0], np.zeros(ACTION_DIM))
+
+    def state(self) -> np.ndarray:
+        mujoco.mj_getState(self.scene.model, self.scene.data, self._state, self._state_spec)
+        return self._state.copy()
+
+    def observation(self) -> dict[str, np.ndarray]:
+        """What a learned policy sees: hand and object state, the next reference frames."""
+        sc, d = self.scene, self.scene.data
+        t1 = min(self.t + 1, self.ref.num_frames - 1)
+        p, q = sc.object_pose()
+        return {
+            "hand_qpos": d.qpos[sc.hand.qpos_adr].copy(),
+            "hand_qvel": d.qvel[sc.hand.dof_adr].copy(),
+            "object_pos": p,
+            "object_quat": q,
+            "object_vel": d.qvel[sc.object_dof_adr : sc.object_dof_adr + 6].copy(),
+            "ref_ctrl_next": self.ctrl_ref[t1].copy(),
+            "ref_object_pos_next": self.ref.object_pos[t1].copy(),
+            "ref_object_quat_next": self.ref.object_quat[t1].copy(),
+            "residual": self.u.copy(),
+        }
+
+    @property
+    def done(self) -> bool:
+        return self.failed_at is not None or self.t >= self.ref.num_frames - 1
+
+    # -- controls -------------------------------------------------------------------------
+
+    def _clip(self, ctrl: np.ndarray) -> np.ndarray:
+        return np.clip(ctrl, self.ctrl_low, self.ctrl_high)
+
+    def plan_controls(self, actions: np.ndarray) -> np.ndarray:
+        """Per-physics-step controls ``(K, H·substeps, nu)`` for action plans ``(K, H, 11)``
+        starting at the current frame and residual."""
+        K, H, _ = actions.shape
+        T = self.ref.num_frames
+        u = np.broadcast_to(self.u, (K, ACTION_DIM)).copy()
+        tau = self.cfg.tau
+        ctrl = np.empty((K, H, self.scene.model.nu))
+        act_ids = self.scene.hand.actuator
+        for h in range(H):
+            u = np.clip(tau * u + actions[:, h], -1.0, 1.0)
+            target = self.ctrl_ref[min(self.t + 1 + h, T - 1)] + u @ self.M.T
+            ctrl[:, h][:, act_ids] = self._clip(target)
+        return np.repeat(ctrl, self.scene.substeps, axis=1)
+
+    def rollout_object_poses(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Object position and quaternion ``(K, H, 7)`` and fingertips in the object frame
+        ``(K, H, 5, 3)`` at the end of each planned frame."""
+        sc = self.scene
+        ctrl = self.plan_controls(actions)
+        state, sens = mj_rollout.rollout(
+            sc.model,
+            self.rollout_data,
+            self.state()[None],
+            ctrl,
+            initial_warmstart=sc.data.qacc_warmstart[None].copy(),
+        )
+        a = 1 + sc.object_qpos_adr  # state = [time, qpos, qvel, ...]
+        k = slice(sc.substeps - 1, None, sc.substeps)
+        tips = sens[:, k, : 3 * len(FINGERS)].reshape(*sens[:, k].shape[:2], len(FINGERS), 3)
+        return state[:, k, a : a + 7], tips
+
+    def rewards(self, poses: np.ndarray, tips: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        """``(K, H)`` per-frame rewards of rollouts (from :meth:`rollout_object_poses`)."""
+        H = poses.shape[1]
+        T = self.ref.num_frames
+        idx = np.minimum(self.t + 1 + np.arange(H), T - 1)
+        e_p = np.linalg.norm(poses[..., :3] - self.ref.object_pos[idx], axis=-1)
+        e_r = quat_angle(poses[..., 3:], self.ref.object_quat[idx])
+        c = self.cfg
+        r = np.exp(-c.reward_pos_k * e_p) + c.reward_rot_w * np.exp(-c.reward_rot_k * e_r)
+        r -= c.action_penalty * np.sum(actions**2, axis=-1)
+        if c.contact_reward:
+            w = self.tip_weight[idx]  # (H, 5)
+            dist = np.linalg.norm(tips - self.ref.tips_object[idx], axis=-1)  # (K, H, 5)
+            r += c.contact_reward * np.sum(w * np.exp(-c.contact_k * dist), axis=-1) / len(FINGERS)
+        if c.residual_penalty:
+            u = np.broadcast_to(self.u, actions[:, 0].shape).copy()
+            for h in range(H):
+                u = np.clip(c.tau * u + actions[:, h], -1.0, 1.0)
+                r[:, h] -= c.residual_penalty * np.sum(u * u, axis=-1)
+        # a rollout that loses the object earns nothing afterwards
+        lost = np.cumsum(e_p > c.fail_pos_m, axis=1) > 0
+        return np.where(lost, -1.0, r)
+
+    # -- stepping -------------------------------------------------------------------------
+
+    def step(self, a: np.ndarray) -> float:
+        """Advance one data frame with residual action ``a (11,)``; returns the reward."""
+        if self.done:
+            raise ValidationError("the tracking episode is over; call reset()")
+        a = np.asarray(a, dtype=np.float64).reshape(ACTION_DIM)
+        if not np.isfinite(a).all():
+            raise ValidationError("tracker returned a non-finite action", field="action")
+        sc = self.scene
+        m, d = sc.model, sc.data
+        self.u = np.clip(self.cfg.tau * self.u + a, -1.0, 1.0)
+        target = self.ctrl_ref[self.t + 1] + self.M @ self.u
+        d.ctrl[sc.hand.actuator] = self._clip(target)
+        acc = FrameAccumulator(sc.substeps)
+        for _ in range(sc.substeps):
+            com = d.xipos[sc.object_body].copy()
+            mujoco.mj_step(m, d)
+            acc.add(read_contacts(sc, d), com)
+        self.t += 1
+        err = self._record(finish_frame(acc), target, a)
+        if err > self.cfg.fail_pos_m and self.failed_at is None:
+            self.failed_at = self.t
+        c = self.cfg
+        return float(
+            np.exp(-c.reward_pos_k * err)
+            + np.exp(-c.reward_rot_k * self.log.rot_err[-1])
+            - c.action_penalty * a @ a
+        )
+
+    def _record(self, fc: FrameContacts, target: np.ndarray, a: np.ndarray) -> float:
+        sc, d = self.scene, self.scene.data
+        p, q = sc.object_pose()
+        err = float(np.linalg.norm(p - self.ref.object_pos[self.t]))
+        log = self.log
+        log.object_pos.append(p)
+        log.object_quat.append(q)
+        log.pos_err.append(err)
+        log.rot_err.append(float(quat_angle(q, self.ref.object_quat[self.t])))
+        log.hand_qpos.append(d.qpos[sc.hand.qpos_adr].copy())
+        log.ctrl.append(target.copy())
+        log.action.append(a.copy())
+        log.contacts.append(fc)
+        log.object_acc.append(_com_acceleration(sc, d))
+        log.poses.append(_frame_poses(sc, d, fc))
+        return err
+
+
+@dataclass
+class TrackLog:
+    """Per-frame records of a tracking episode."""
+
+    object_pos: list = field(default_factory=list)
+    object_quat: list = field(default_factory=list)
+    pos_err: list = field(default_factory=list)
+    rot_err: list = field(default_factory=list)
+    hand_qpos: list = field(default_factory=list)
+    ctrl: list = field(default_factory=list)
+    action: list = field(default_factory=list)
+    contacts: list = field(default_factory=list)
+    object_acc: list = field(default_factory=list)
+    poses: list = field(default_factory=list)
+
+
+def _quat_to_R(q: np.ndarray) -> np.ndarray:
+    R = np.zeros(9)
+    mujoco.mju_quat2Mat(R, np.asarray(q, dtype=np.float64))
+    return R.reshape(3, 3)
+
+
+def _com_acceleration(sc, d: mujoco.MjData) -> np.ndarray:
+    """Linear acceleration [m/s²] of the object's COM from the last step's ``qacc``."""
+    v = sc.object_dof_adr
+    a_o = d.qacc[v : v + 3]
+    R = d.xmat[sc.object_body].reshape(3, 3)
+    w = R @ d.qvel[v + 3 : v + 6]  # free joint angular velocity/acceleration are body-local
+    alpha = R @ d.qacc[v + 3 : v + 6]
+    r = d.xipos[sc.object_body] - d.xpos[sc.object_body]
+    return a_o + np.cross(alpha, r) + np.cross(w, np.cross(w, r))
+
+
+def _frame_poses(sc, d: mujoco.MjData, fc: FrameContacts) -> FramePoses:
+    m = sc.model
+    R_body, p_body = {}, {}
+    for g in fc.hand_geom:
+        b = m.geom_bodyid[g]
+        R_body[int(g)] = d.xmat[b].reshape(3, 3).copy()
+        p_body[int(g)] = d.xpos[b].copy()
+    return FramePoses(
+        R_wrist=d.xmat[sc.hand.palm_body].reshape(3, 3).copy(),
+        p_wrist=d.xpos[sc.hand.palm_body].copy(),
+        R_obj=d.xmat[sc.object_body].reshape(3, 3).copy(),
+        p_obj=d.xpos[sc.object_body].copy(),
+        R_body=R_body,
+        p_body=p_body,
+    )
+
+
+# -- trackers ---------------------------------------------------------------------------------
+
+
+class ResidualTracker(Protocol):
+    """Chooses the residual action of each frame (see the module docstring)."""
+
+    def reset(self, env: TrackingEnv) -> None: ...
+
+    def act(self, env: TrackingEnv) -> np.ndarray: ...
+
+
+class OpenLoop:
+    """Zero residual: the reference plus the grip bias, replayed open loop."""
+
+    def reset(self, env: TrackingEnv) -> None:
+        pass
+
+    def act(self, env: TrackingEnv) -> np.ndarray:
+        return np.zeros(ACTION_DIM)
+
+
+@dataclass(frozen=True)
+class MPCConfig:
+    """Sampling MPC settings (DESIGN.md, "Tracking human demonstrations in physics")."""
+
+    samples: int = 16
+    horizon_s: float = 0.2
+    replan_s: float = 0.05
+    knots: int = 3
+    noise: float = 0.02
+    """Standard deviation of the sampled actions (residual units per frame)."""
+    noise_wrist_rot: float = 0.02
+    noise_finger: float = 0.03
+    elite_frac: float = 0.25
+    min_gain: float = 0.01
+    """A new plan replaces the current one only if some sample's return beats it by more than
+    this per planned frame (otherwise sampling noise would random-walk the residual)."""
+    temperature: float = 0.05
+    """Softmax temperature [reward per planned frame]: samples whose returns differ by less
+    than this per frame are averaged rather than chosen between (sampling noise)."""
+    seed: int = 0
+
+
+class SamplingMPC:
+    """Predictive sampling over residual action knots, scored by rollouts of the real scene.
+
+    Every ``replan_s``: perturb the current plan's knots with Gaussian noise (sample 0 keeps
+    the plan unchanged, sample 1 returns to the reference), roll all samples out for
+    ``horizon_s`` with ``mujoco.rollout`` from the exact current physics state, and, if some
+    sample beats the current plan by more than ``min_gain`` per frame, replace the plan by the
+    softmax-weighted mean of the best ``elite_frac`` samples. Deterministic for a given seed.
+    """
+
+    def __init__(self, cfg: MPCConfig | None = None):
+        self.cfg = MPCConfig() if cfg is None else cfg
+        if self.cfg.samples < 2 or self.cfg.knots < 1:
+            raise ValidationError("MPC needs at least 2 samples and 1 knot", field="mpc")
+        self.rollout_steps = 0
+
+    def reset(self, env: TrackingEnv) -> None:
+        c = self.cfg
+        self.H = max(2, round(c.horizon_s * env.ref.fps))
+        self.replan = max(1, round(c.replan_s * env.ref.fps))
+        self.plan = np.zeros((self.H, ACTION_DIM))
+        self.plan_t = env.t
+        self.rng = np.random.default_rng(c.seed)
+        self.sigma = np.array([c.noise] * 3 + [c.noise_wrist_rot] * 3 + [c.noise_finger] * 5)
+        knot_t = np.linspace(0, self.H - 1, c.knots) if c.knots > 1 else np.zeros(1)
+        # (H, knots) linear interpolation weights
+        self.interp = np.stack(
+            [np.interp(np.arange(self.H), knot_t, np.eye(c.knots)[k]) for k in range(c.knots)],
+            axis=1,
+        )
+        self.rollout_steps = 0
+
+    def act(self, env: TrackingEnv) -> np.ndarray:
+        k = env.t - self.plan_t
+        if k >= self.replan or env.t == self.plan_t:
+            self._replan(env, shift=k)
+            k = 0
+        return self.plan[k]
+
+    def _replan(self, env: TrackingEnv, shift: int) -> None:
+        c = self.cfg
+        nominal = np.zeros_like(self.plan)
+        if shift < self.H:
+            nominal[: self.H - shift] = self.plan[shift:]
+        eps = self.rng.standard_normal((c.samples, c.knots, ACTION_DIM)) * self.sigma
+        eps[:2] = 0.0
+        actions = nominal[None] + np.einsum("hk,nka->nha", self.interp, eps)
+        # sample 1: return to the reference at once (u = 0 from the next frame on)
+        actions[1] = 0.0
+        actions[1, 0] = -env.cfg.tau * env.u
+        poses, tips = env.rollout_object_poses(actions)
+        self.rollout_steps += actions.shape[0] * actions.shape[1] * env.scene.substeps
+        ret = env.rewards(poses, tips, actions).sum(axis=1)
+        self.last_returns = ret
+        if ret.max() - ret[0] <= c.min_gain * self.H:
+            self.plan = actions[0]  # nothing is clearly better: keep the plan (no drift)
+        else:
+            n_elite = max(1, round(c.elite_frac * c.samples))
+            elite = np.argsort(-ret)[:n_elite]
+            w = np.exp((ret[elite] - ret[elite].max()) / (c.temperature * self.H))
+            w /= w.sum()
+            self.plan = np.einsum("n,nha->ha", w, actions[elite])
+        self.plan_t = env.t
+
+
+def track(env: TrackingEnv, tracker: ResidualTracker, progress=None) -> TrackLog:
+    """Run ``tracker`` on ``env`` from its reset state until the end or the first failure."""
+    env.reset()
+    tracker.reset(env)
+    while not env.done:
+        env.step(tracker.act(env))
+        if progress is not None:
+            progress(1)
+    return env.log
