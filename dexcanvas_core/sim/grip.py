@@ -55,6 +55,7 @@ def squeeze_offsets(
     safety: float,
     friction: float,
     palm_contact_m: float = 0.01,
+    balance: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(T, 51)`` joint-target offsets and ``(T, 5)`` the commanded pad forces [N].
 
@@ -63,6 +64,8 @@ def squeeze_offsets(
         ctrl_ref: ``(T, 51)`` reference actuator targets (the pose the pads are measured in).
         object_pos, object_quat: ``(T, 3)``, ``(T, 4)`` reference object pose.
         weights: ``(T, 5)`` grip weights in [0, 1] per finger.
+        balance: balance the pad forces (module docstring); ``False``: every pad gets
+            ``F_hold`` (e.g. one finger pressing a fixed object).
     """
     m = scene.model
     d = mujoco.MjData(m)
@@ -107,7 +110,10 @@ def squeeze_offsets(
             sd, _ = scene.geometry.sdf_and_normal(((p - p_o) @ R_o)[None])
             if sd[0] - m.geom_size[g, 0] < palm_contact_m:
                 n_p.append(n_w)
-        F = balanced_forces(np.array(n_k), np.array(n_p).reshape(-1, 3), F_hold)
+        if balance:
+            F = balanced_forces(np.array(n_k), np.array(n_p).reshape(-1, 3), F_hold)
+        else:
+            F = np.full(len(act), F_hold)
         for i, k in enumerate(act):
             f = -n_k[i] * w[k] * F[i]
             out[t, cols[k]] = (J_k[i].T @ f) / kp[cols[k]]
