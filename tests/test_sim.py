@@ -71,7 +71,7 @@ def test_hinge_decomposition_round_trips_mano_poses():
 
 
 def test_simulated_hand_reproduces_the_demonstration_keypoints(demo):
-    geo, ref, scene = prepare(demo, SimConfig())
+    _geo, ref, scene = prepare(demo, SimConfig())
     res = keypoint_residual(scene, ref)
     assert res.shape == (demo.num_frames,)
     assert res.max() < 1e-6  # exact kinematics, no joint limit hit in this demo
@@ -223,7 +223,7 @@ def test_mpc_is_deterministic_and_tracks(demo):
     short = demo.slice(200, 320)  # the grasp and the start of the lift
     out = []
     for _ in range(2):
-        geo, ref, scene = prepare(short, SimConfig())
+        _geo, ref, scene = prepare(short, SimConfig())
         env = TrackingEnv(scene, ref)
         mpc = SamplingMPC(MPCConfig(samples=8, seed=3))
         log = track(env, mpc)
@@ -246,7 +246,7 @@ def test_a_learned_policy_plugs_in_through_the_tracker_interface(demo):
             self.seen += 1
             return np.full(ACTION_DIM, 0.001)
 
-    geo, ref, scene = prepare(demo.slice(0, 40), SimConfig())
+    _geo, ref, scene = prepare(demo.slice(0, 40), SimConfig())
     env = TrackingEnv(scene, ref)
     pol = Policy()
     track(env, pol)
@@ -262,7 +262,7 @@ def test_bad_inputs_are_refused(demo):
     left = dataclasses.replace(demo, hands=[dataclasses.replace(demo.hand, name="left")])
     with pytest.raises(ValidationError, match="right hand"):
         simulate(left)
-    geo, ref, scene = prepare(demo.slice(0, 3), SimConfig())
+    _geo, ref, scene = prepare(demo.slice(0, 3), SimConfig())
     env = TrackingEnv(scene, ref)
     with pytest.raises(ValidationError, match="non-finite"):
         env.step(np.full(ACTION_DIM, np.nan))
@@ -325,7 +325,7 @@ def test_pose_perturbation_moves_hand_and_object_rigidly(demo):
     )
     np.testing.assert_allclose(moved.object.pos[:, 2], demo.object.pos[:, 2], atol=1e-6)
     # the MANO wrist stays consistent with the keypoints
-    geo, ref, scene = prepare(moved, SimConfig())
+    _geo, ref, scene = prepare(moved, SimConfig())
     assert keypoint_residual(scene, ref).max() < 1e-5
 
 
@@ -344,7 +344,7 @@ def test_synthesized_rollout_is_a_consistent_generated_trajectory(demo):
     assert tr.is_generated and tr.seed_uuid == short.uuid and tr.uuid != short.uuid
     assert json.loads(tr.extras["synthesis"])["index"] == 0
     # its hand track is the simulated hand: re-simulating it reproduces its own keypoints
-    geo, ref, scene = prepare(tr, SimConfig())
+    _geo, ref, scene = prepare(tr, SimConfig())
     assert keypoint_residual(scene, ref).max() < 1e-4
     tr.validate()
 
