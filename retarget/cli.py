@@ -10,9 +10,12 @@ exit code 2.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
+import signal
 import sys
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -112,9 +115,36 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--backend", choices=["pinocchio", "mink"], default="pinocchio")
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
+    p.add_argument(
+        "--snapshot",
+        action="store_true",
+        help="also write stills and scene.html of the run into its directory (retarget snapshot)",
+    )
+    p.add_argument(
+        "--renderer",
+        choices=["auto", "chromium", "mujoco"],
+        default="auto",
+        help="renderer of the --snapshot stills (default: Chromium if installed, else MuJoCo)",
+    )
+
+
+@dataclass(frozen=True)
+class RunAndSnapshotConfig:
+    """``retarget run --snapshot``: the run, then stills of it into its directory."""
+
+    run: object
+    """The ``retarget.run.RunConfig``."""
+    renderer: str = "auto"
 
 
 def _run_config(args: argparse.Namespace):
+    cfg = _plain_run_config(args)
+    if getattr(args, "snapshot", False):
+        return RunAndSnapshotConfig(run=cfg, renderer=args.renderer)
+    return cfg
+
+
+def _plain_run_config(args: argparse.Namespace):
     from retarget.run import RunConfig
 
     return RunConfig(
@@ -131,7 +161,155 @@ def _run_config(args: argparse.Namespace):
 def _run(cfg) -> dict:
     from retarget.run import run_retarget
 
+    if isinstance(cfg, RunAndSnapshotConfig):
+        from retarget.viz.snapshot import check_renderer, snapshot_run
+
+        check_renderer(cfg.renderer)  # before the long part
+        metrics = run_retarget(cfg.run)
+        with _sigterm_as_exit():
+            manifest = snapshot_run(cfg.run.output_dir(), renderer=cfg.renderer)
+        if cfg.run.progress:
+            _print_snapshot(manifest, cfg.run.output_dir())
+        return metrics
     return run_retarget(cfg)
+
+
+# ---------------------------------------------------------------------------- retarget snapshot
+
+
+@contextlib.contextmanager
+def _sigterm_as_exit():
+    """Turn SIGTERM into SystemExit while the block runs, so that the ``with`` blocks holding
+    child processes (meshcat server, Chromium, MuJoCo renderer) end them on ``kill`` too."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise SystemExit(128 + signum)
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _add_snapshot_args(p: argparse.ArgumentParser) -> None:
+    src = p.add_argument_group("what to draw (--hand and --pair, or --run)")
+    src.add_argument("--hand", default=None, help="robot hand (see `retarget hands`)")
+    src.add_argument("--pair", default=None, help="OBJECT/TYPE, e.g. cube2/tripod")
+    src.add_argument(
+        "--dataset",
+        type=Path,
+        default=None,
+        help="DexCanvas Lance dataset (default: the built-in demonstrations)",
+    )
+    src.add_argument("--index", type=int, default=0, help="which demonstration of the pair")
+    src.add_argument(
+        "--run", type=Path, default=None, metavar="RUN_DIR", help="draw an existing run directory"
+    )
+    p.add_argument("--out", type=Path, required=True, help="output directory")
+    which = p.add_mutually_exclusive_group()
+    which.add_argument("--frames", default=None, help="frames to draw, e.g. 0,60,120")
+    which.add_argument("--every", type=int, default=None, metavar="N", help="every N-th frame")
+    p.add_argument(
+        "--renderer",
+        choices=["auto", "chromium", "mujoco"],
+        default="auto",
+        help="headless Chromium (meshcat page) or MuJoCo offscreen; auto: Chromium if installed",
+    )
+    p.add_argument("--layout", choices=["side_by_side", "overlay"], default="side_by_side")
+    p.add_argument(
+        "--robot",
+        choices=["sim", "kinematic"],
+        default="sim",
+        help="draw the re-simulated hand (with its contacts) or the retargeted joint solution",
+    )
+    p.add_argument("--width", type=int, default=800, help="picture width [px]")
+    p.add_argument("--height", type=int, default=600, help="picture height [px]")
+    p.add_argument("--no-html", action="store_true", help="do not write scene.html")
+    p.add_argument("--backend", choices=["pinocchio", "mink"], default="pinocchio")
+    p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
+
+
+def _snapshot_config(args: argparse.Namespace):
+    from retarget.viz.snapshot import SnapshotConfig, parse_frames
+
+    return SnapshotConfig(
+        out=args.out,
+        hand=args.hand,
+        pair=args.pair,
+        dataset=args.dataset,
+        index=args.index,
+        run_dir=args.run,
+        frames=parse_frames(args.frames) if args.frames is not None else None,
+        every=args.every,
+        renderer=args.renderer,
+        layout=args.layout,
+        robot=args.robot,
+        width=args.width,
+        height=args.height,
+        scene_html=not args.no_html,
+        backend=args.backend,
+        progress=not args.quiet,
+    ).validate()
+
+
+def _print_snapshot(manifest: dict, out_dir: Path) -> None:
+    files = ", ".join(manifest["files"])
+    print(f"{len(manifest['files'])} still(s) by {manifest['renderer']} in {out_dir}: {files}")
+    if manifest.get("scene_html"):
+        print(f"animated scene: {out_dir / manifest['scene_html']}")
+
+
+def _snapshot(cfg) -> dict:
+    from retarget.viz.snapshot import run_snapshot
+
+    with _sigterm_as_exit():
+        manifest = run_snapshot(cfg)
+    if cfg.progress:
+        _print_snapshot(manifest, Path(cfg.out))
+    return manifest
+
+
+# ---------------------------------------------------------------------------- retarget report
+
+
+def _add_report_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("run_dirs", nargs="+", type=Path, metavar="RUN_DIR", help="run directories")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="HTML file (default RUN_DIR/report.html; several runs: in their common parent)",
+    )
+    p.add_argument(
+        "--no-snapshots", action="store_true", help="do not render stills for runs without them"
+    )
+    p.add_argument("--renderer", choices=["auto", "chromium", "mujoco"], default="auto")
+    p.add_argument("--plot-format", choices=["png", "svg"], default="png")
+
+
+def _report_config(args: argparse.Namespace):
+    from retarget.viz.report import ReportConfig
+
+    return ReportConfig(
+        run_dirs=tuple(args.run_dirs),
+        out=args.out,
+        snapshots=not args.no_snapshots,
+        renderer=args.renderer,
+        plot_format=args.plot_format,
+    ).validate()
+
+
+def _report(cfg) -> Path:
+    from retarget.viz.report import run_report
+
+    with _sigterm_as_exit():
+        out = run_report(cfg)
+    print(f"report: {out}")
+    return out
 
 
 # ---------------------------------------------------------------------------- command table
@@ -160,6 +338,18 @@ COMMANDS: dict[str, Command] = {
         add_arguments=_add_hands_args,
         make_config=_hands_config,
         run=run_hands,
+    ),
+    "snapshot": Command(
+        help="stills of chosen frames (headless Chromium or MuJoCo) and the scene as HTML",
+        add_arguments=_add_snapshot_args,
+        make_config=_snapshot_config,
+        run=_snapshot,
+    ),
+    "report": Command(
+        help="one offline HTML page of runs: metrics, stills, force and error plots, heatmap",
+        add_arguments=_add_report_args,
+        make_config=_report_config,
+        run=_report,
     ),
 }
 
