@@ -38,43 +38,9 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from _common import generate
 
 DEFAULT_OUT = Path(__file__).parent / "results" / "mocap_fit.json"
-
-
-def pick_pairs(n: int, seed: int) -> list:
-    """``n`` feasible pairs, round-robin over the manipulation types (shuffled within a type)."""
-    from dexcanvas_core.demos import feasible_pairs
-
-    rng = np.random.default_rng(seed)
-    by_type: dict[str, list] = {}
-    for p in feasible_pairs():
-        by_type.setdefault(p.manipulation_type.name, []).append(p)
-    for v in by_type.values():
-        rng.shuffle(v)
-    types = sorted(by_type)
-    out = []
-    k = 0
-    while len(out) < n:
-        t = types[k % len(types)]
-        out.append(by_type[t][(k // len(types)) % len(by_type[t])])
-        k += 1
-    return out
-
-
-def generate(n: int, seed: int) -> list:
-    from dexcanvas_core.demos import OPERATORS, generate_demo
-
-    ops = sorted(OPERATORS)
-    trajs = []
-    for i, pair in enumerate(pick_pairs(n, seed)):
-        for attempt in range(3):
-            try:
-                trajs.append(generate_demo(pair, ops[i % len(ops)], seed + i + 1000 * attempt))
-                break
-            except Exception as e:  # a rare infeasible seed: try another
-                logging.warning("demo %s failed (%s); retrying with another seed", pair, e)
-    return [d.trajectory if hasattr(d, "trajectory") else d for d in trajs]
 
 
 def _noop(_: int) -> None:

@@ -16,7 +16,12 @@ surface stops it (the "squeeze", ``Δq = K⁻¹ Jᵀ f``):
   object's weight shared by the fingers near it. ``w`` ∈ [0, 1] ramps with the pad's distance to
   the surface (``grip_weights``) and is smoothed in time;
 * ``J`` is the pad point's translational Jacobian over that finger's hinges, ``K`` the hinges'
-  position gains: at equilibrium against the surface ``K (q_target − q) = Jᵀ f``.
+  position gains: at equilibrium against the surface ``K (q_target − q) = Jᵀ f``;
+* optionally (``max_gap_m`` > 0, off by default) a pad that the reference holds short of the
+  surface by ``g`` is first moved onto it: ``Δq += J⁺ (−n · min(g, max_gap_m))`` (damped
+  pseudo-inverse). Measured on the 57 built-in demonstrations with the open-loop tracker it
+  lowered success (27 vs 30 with 5 mm, 18 vs 30 with 10 mm): closing fingers the human held
+  clear pushes the object before the grasp holds.
 """
 
 from __future__ import annotations
@@ -56,6 +61,7 @@ def squeeze_offsets(
     friction: float,
     palm_contact_m: float = 0.01,
     balance: bool = True,
+    max_gap_m: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(T, 51)`` joint-target offsets and ``(T, 5)`` the commanded pad forces [N].
 
@@ -95,10 +101,12 @@ def squeeze_offsets(
         n_near = max(1.0, float((w > 0.5).sum()))
         F_hold = max(force_min_n, safety * mass * GRAVITY / (friction * n_near))
         act = [k for k in range(len(geoms)) if w[k] > 0]
-        pts_k, n_k, J_k = [], [], []
+        pts_k, n_k, J_k, gaps = [], [], [], []
         for k in act:
             g = geoms[k]
             p, n_w = _closest_on_axis(scene, d, g, s, R_o, p_o)
+            sd, _ = scene.geometry.sdf_and_normal(((p - p_o) @ R_o)[None])
+            gaps.append(min(float(sd[0]) - m.geom_size[g, 0], max_gap_m))
             mujoco.mj_jac(m, d, jacp, None, p, m.geom_bodyid[g])
             pts_k.append(p)
             n_k.append(n_w)
@@ -116,7 +124,11 @@ def squeeze_offsets(
             F = np.full(len(act), F_hold)
         for i, k in enumerate(act):
             f = -n_k[i] * w[k] * F[i]
-            out[t, cols[k]] = (J_k[i].T @ f) / kp[cols[k]]
+            dq = (J_k[i].T @ f) / kp[cols[k]]
+            if gaps[i] > 0 and w[k] > 0.99:  # close the gap first: move the pad onto the surface
+                J = J_k[i]
+                dq += w[k] * J.T @ np.linalg.solve(J @ J.T + 1e-4 * np.eye(3), -n_k[i] * gaps[i])
+            out[t, cols[k]] = dq
             force[t, k] = w[k] * F[i]
     return out, force
 
