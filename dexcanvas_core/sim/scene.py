@@ -120,6 +120,7 @@ class PhysicsSettings:
     two geoms' coefficients per contact)."""
     table_friction: tuple[float, float, float] = (0.6, 0.005, 0.0001)
     max_timestep_s: float = 0.0025
+    noslip_iterations: int = 0
 
     def timestep(self, fps: float) -> float:
         dt = 1.0 / (fps * self.substeps)
@@ -135,7 +136,6 @@ class PhysicsSettings:
         d = dataclasses.asdict(self)
         d["timestep_s"] = self.timestep(fps)
         d["engine"] = f"mujoco {mujoco.__version__}"
-        d["noslip_iterations"] = 0
         return d
 
 
@@ -161,6 +161,7 @@ def apply_physics(spec: mujoco.MjSpec, physics: PhysicsSettings, fps: float) -> 
     spec.option.impratio = physics.impratio
     spec.option.o_solref = list(physics.solref)
     spec.option.o_solimp = list(physics.solimp)
+    spec.option.noslip_iterations = physics.noslip_iterations
 
 
 @dataclass
