@@ -312,6 +312,42 @@ def _report(cfg) -> Path:
     return out
 
 
+@dataclass(frozen=True)
+class KeypointsConfig:
+    hand: str
+    input: Path
+    fps: float
+    out: Path
+    order: str = "mano21"
+    units: str = "m"
+
+
+def _add_keypoints_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--hand", required=True, help="registered hand (retarget hands)")
+    p.add_argument(
+        "--input",
+        type=Path,
+        required=True,
+        help="(T, 21, 3) keypoints: .npy, .npz (key 'keypoints') or .csv (63 columns)",
+    )
+    p.add_argument("--order", choices=["mano21", "openpose21"], default="mano21")
+    p.add_argument("--units", choices=["m", "cm", "mm"], default="m")
+    p.add_argument("--fps", type=float, required=True, help="frame rate [Hz]")
+    p.add_argument("--out", type=Path, required=True, help="output directory")  # fmt: skip
+
+
+def _keypoints_config(args: argparse.Namespace) -> KeypointsConfig:
+    if not args.fps > 0:
+        raise SystemExit("retarget keypoints: error: --fps must be positive")
+    return KeypointsConfig(args.hand, args.input, args.fps, args.out, args.order, args.units)
+
+
+def _keypoints(cfg: KeypointsConfig) -> dict:
+    from retarget.keypoint_input import run_keypoints
+
+    return run_keypoints(cfg)
+
+
 # ---------------------------------------------------------------------------- command table
 
 
@@ -338,6 +374,12 @@ COMMANDS: dict[str, Command] = {
         add_arguments=_add_hands_args,
         make_config=_hands_config,
         run=run_hands,
+    ),
+    "keypoints": Command(
+        help="retarget a bare 21-keypoint sequence (video or teleoperation; no object)",
+        add_arguments=_add_keypoints_args,
+        make_config=_keypoints_config,
+        run=_keypoints,
     ),
     "snapshot": Command(
         help="stills of chosen frames (headless Chromium or MuJoCo) and the scene as HTML",

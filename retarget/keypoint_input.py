@@ -79,3 +79,80 @@ def retarget_keypoints(hand, keypoints: np.ndarray, fps: float, order: str = "ma
 
     traj = keypoints_to_trajectory(keypoints, fps, order)
     return Retargeter(hand, None, config).retarget(traj)
+
+
+def load_keypoints(path, units: str = "m") -> np.ndarray:
+    """``(T, 21, 3)`` keypoints [m] from ``.npy`` (the array), ``.npz`` (key ``keypoints``) or
+    ``.csv`` (one frame per row, 63 columns x0, y0, z0, x1, …; a header row is skipped)."""
+    from pathlib import Path
+
+    path = Path(path)
+    scale = {"m": 1.0, "cm": 0.01, "mm": 0.001}.get(units)
+    if scale is None:
+        raise RetargetError(f"--units must be m, cm or mm, got {units!r}")
+    if not path.exists():
+        raise RetargetError(f"keypoint file {path} does not exist")
+    try:
+        if path.suffix == ".npy":
+            a = np.load(path)
+        elif path.suffix == ".npz":
+            with np.load(path) as z:
+                if "keypoints" not in z:
+                    raise RetargetError(f"{path} has no 'keypoints' array (found: {list(z)})")
+                a = z["keypoints"]
+        elif path.suffix == ".csv":
+            a = np.genfromtxt(path, delimiter=",", skip_header=0)
+            if a.ndim == 2 and np.isnan(a[0]).all():
+                a = a[1:]
+        else:
+            raise RetargetError(f"unsupported keypoint file {path.name}: use .npy, .npz or .csv")
+    except (OSError, ValueError) as e:
+        raise RetargetError(f"cannot read keypoints from {path}: {e}") from e
+    a = np.asarray(a, dtype=np.float64)
+    if a.ndim == 2 and a.shape[1] == 63:
+        a = a.reshape(-1, 21, 3)
+    if a.ndim != 3 or a.shape[1:] != (21, 3) or a.shape[0] < 2:
+        raise RetargetError(
+            f"{path}: keypoints must have shape (T >= 2, 21, 3) or (T, 63), got {a.shape}"
+        )
+    bad = ~np.isfinite(a).all(axis=(1, 2))
+    if bad.any():
+        raise RetargetError(
+            f"{path}: {int(bad.sum())} frame(s) hold NaN/inf (first: frame {int(np.argmax(bad))}); "
+            "interpolate or drop them first"
+        )
+    return a * scale
+
+
+def run_keypoints(cfg) -> dict:
+    """``retarget keypoints``: retarget a keypoint file; write the trajectory and metrics."""
+    import json
+    import os
+
+    from retarget.hands import get_hand
+
+    kp = load_keypoints(cfg.input, cfg.units)
+    hand = get_hand(cfg.hand)
+    robot = retarget_keypoints(hand, kp, cfg.fps, cfg.order)
+    out = cfg.out
+    out.mkdir(parents=True, exist_ok=True)
+    robot.save_npz(out / "robot_trajectory.npz")
+    metrics = {
+        "hand": hand.name,
+        "input": str(cfg.input),
+        "order": cfg.order,
+        "frames": int(kp.shape[0]),
+        "fps": cfg.fps,
+        "keypoint_err_mean_m": float(robot.keypoint_err.mean()),
+        "keypoint_err_max_m": float(robot.keypoint_err.max()),
+        "ms_per_frame": robot.ms_per_frame,
+    }
+    tmp = out / ".metrics.json.tmp"
+    tmp.write_text(json.dumps(metrics, indent=2, sort_keys=True))
+    os.replace(tmp, out / "metrics.json")
+    err_mm = 1e3 * metrics["keypoint_err_mean_m"]
+    print(
+        f"{hand.name}: {kp.shape[0]} frames, keypoint error {err_mm:.1f} mm mean, "
+        f"{metrics['ms_per_frame']:.2f} ms/frame → {out}/robot_trajectory.npz"
+    )
+    return metrics

@@ -247,3 +247,82 @@ def test_keypoint_only_entry_point(demo):
         keypoints_to_trajectory(bad, 120.0)
     with pytest.raises(RetargetError, match=r"shape \(T, 21, 3\)"):
         keypoints_to_trajectory(kp[:, :20], 120.0)
+
+
+def test_cli_keypoints_retargets_a_keypoint_file(demo, tmp_path, capsys):
+    from dexcanvas_core.keypoints import convert_keypoints
+
+    kp = convert_keypoints(demo.hand.joint_pos[:30].astype(np.float64), "mano21", "openpose21")
+    np.savez(tmp_path / "kp.npz", keypoints=kp * 1000.0)  # in millimetres
+    out = tmp_path / "out"
+    rc = main(
+        [
+            "keypoints",
+            "--hand",
+            "leap",
+            "--input",
+            str(tmp_path / "kp.npz"),
+            "--order",
+            "openpose21",
+            "--units",
+            "mm",
+            "--fps",
+            "120",
+            "--out",
+            str(out),
+        ]
+    )
+    assert rc == 0
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["frames"] == 30 and 0 < m["keypoint_err_mean_m"] < 0.05
+    with np.load(out / "robot_trajectory.npz") as z:
+        assert z["q"].shape[0] == 30
+    # the same keypoints as CSV (63 columns, header), in metres
+    np.savetxt(tmp_path / "kp.csv", kp.reshape(30, 63), delimiter=",", header="x0,y0,z0,...")
+    rc = main(
+        [
+            "keypoints",
+            "--hand",
+            "leap",
+            "--input",
+            str(tmp_path / "kp.csv"),
+            "--order",
+            "openpose21",
+            "--fps",
+            "120",
+            "--out",
+            str(tmp_path / "o2"),
+        ]
+    )
+    assert rc == 0
+    bad = kp.copy()
+    bad[5, 2] = np.nan
+    np.save(tmp_path / "bad.npy", bad)
+    rc = main(
+        [
+            "keypoints",
+            "--hand",
+            "leap",
+            "--input",
+            str(tmp_path / "bad.npy"),
+            "--fps",
+            "120",
+            "--out",
+            str(tmp_path / "o3"),
+        ]
+    )
+    assert rc == 2 and "frame 5" in capsys.readouterr().err
+    rc = main(
+        [
+            "keypoints",
+            "--hand",
+            "leap",
+            "--input",
+            str(tmp_path / "nope.npy"),
+            "--fps",
+            "120",
+            "--out",
+            str(tmp_path / "o4"),
+        ]
+    )
+    assert rc == 2 and "does not exist" in capsys.readouterr().err

@@ -9,11 +9,13 @@ targets in the public ``urdf_dof`` layout, and metrics:
 
 * ``success`` (DexCanvas rule: every frame's object position error ≤ 5 cm, the whole clip
   tracked), ``success_loose`` (mean < 10 cm and < 0.5 rad), mean/max errors;
-* ``compute_s_per_demo_s`` (wall time of tracking on one core per second of demonstration);
+* ``compute_s_per_demo_s`` (CPU time of the tracking process — one core — per second of
+  demonstration);
 * physical consistency: ``newton_euler_sim`` — ‖F_hand + F_table + m·g − m·a_sim‖ / (m·g) per frame
   (the extraction checked against the simulator's own acceleration), ``newton_euler_capture`` —
   the same with the *captured* object acceleration (do the forces explain the observed motion?
-  both sides moving-averaged over ``CAPTURE_SMOOTH_S``),
+  both sides moving-averaged over ``CAPTURE_SMOOTH_S``); medians over all frames, the frames
+  with hand contact (``*_contact_median``) and the static hold,
   and ``hold_weight_ratio`` — mean vertical hand force / (m·g) over static-hold frames (object
   off the table, captured acceleration below 0.5 m/s²);
 * per-finger mean force magnitude during the hold (``FORCE_GROUPS`` order): the force signature.
@@ -190,6 +192,10 @@ def _capture_acceleration(pos: np.ndarray, fps: float) -> np.ndarray:
     return acc
 
 
+def _median_or_none(x: np.ndarray) -> float | None:
+    return float(np.median(x)) if x.size else None
+
+
 def _finger_means(finger: np.ndarray, hold: np.ndarray) -> dict | None:
     """Mean force magnitude [N] per ``FORCE_GROUPS`` row over the hold frames."""
     if not hold.any():
@@ -222,6 +228,7 @@ def _result(traj, cfg, geometry, ref, scene, env, log, cpu_s) -> SimResult:
     )
     off_table = (lowest > 0.01) & (np.linalg.norm(table[:, :3], axis=1) < 1e-6)
     hold = off_table & (np.linalg.norm(a_cap, axis=1) < 0.5)
+    touch = np.linalg.norm(finger, axis=2).sum(axis=1) > 1e-3  # frames with hand contact
     success = env.failed_at is None and T == ref.num_frames and bool(np.all(pos_err <= 0.05))
     metrics = {
         "uuid": traj.uuid,
@@ -245,6 +252,8 @@ def _result(traj, cfg, geometry, ref, scene, env, log, cpu_s) -> SimResult:
         "newton_euler_sim_median": float(np.median(ne_sim)),
         "newton_euler_capture_median": float(np.median(ne_cap)),
         "newton_euler_capture_hold_median": float(np.median(ne_cap[hold])) if hold.any() else None,
+        "newton_euler_sim_contact_median": _median_or_none(ne_sim[touch]),
+        "newton_euler_capture_contact_median": _median_or_none(ne_cap[touch]),
         "hold_frames": int(hold.sum()),
         "hold_weight_ratio": float(wrench[hold, 2].mean() / mg) if hold.any() else None,
         "hold_finger_force_mean_n": _finger_means(finger, hold),
