@@ -215,8 +215,21 @@ def run_simulate_command(args: argparse.Namespace) -> dict:
 
 def run_synthesize_command(args: argparse.Namespace) -> dict:
     """``dexcanvas synthesize``: perturbed re-tracking, keeping the successful rollouts."""
-    from dexcanvas_core.sim.run import SynthesizeConfig, run_synthesize
+    import numpy as np
 
+    from dexcanvas_core.sim.run import SynthesizeConfig, run_synthesize
+    from dexcanvas_core.sim.synthesis import PerturbationRanges
+
+    ranges = PerturbationRanges(
+        size=args.size,
+        mass=args.mass,
+        friction=args.friction,
+        hand=args.hand_scale,
+        shift_m=args.shift,
+        yaw_rad=float(np.deg2rad(args.yaw_deg)),
+        object_offset_m=args.object_offset,
+        object_offset_yaw_rad=float(np.deg2rad(args.object_offset_yaw_deg)),
+    )
     return run_synthesize(
         SynthesizeConfig(
             dataset=args.dataset,
@@ -227,6 +240,7 @@ def run_synthesize_command(args: argparse.Namespace) -> dict:
             sim=_sim_config(args),
             limit=args.limit,
             overwrite=args.overwrite,
+            ranges=ranges,
         )
     )
 
@@ -240,6 +254,8 @@ def _add_tracker_args(s: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    import numpy as np
+
     p = argparse.ArgumentParser(
         prog="dexcanvas",
         description="DexCanvas human demonstrations: inspect, validate, export, build examples.",
@@ -314,6 +330,21 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
     s.add_argument("--workers", type=int, default=1, help="processes")
     s.add_argument("--limit", type=int, default=None, help="only the first N source rows")
+    from dexcanvas_core.sim.synthesis import PerturbationRanges
+
+    d = PerturbationRanges()
+    g = s.add_argument_group("perturbation half-widths (uniform, relative unless noted)")
+    g.add_argument("--size", type=float, default=d.size, help="object size (default ±20 %%)")
+    g.add_argument("--mass", type=float, default=d.mass)
+    g.add_argument("--friction", type=float, default=d.friction)
+    g.add_argument("--hand-scale", type=float, default=d.hand, help="hand skeleton scale")
+    g.add_argument("--shift", type=float, default=d.shift_m, help="rigid table shift [m]")
+    g.add_argument("--yaw-deg", type=float, default=float(np.rad2deg(d.yaw_rad)),
+                   help="rigid yaw [deg]")  # fmt: skip
+    g.add_argument("--object-offset", type=float, default=d.object_offset_m,
+                   help="object-only offset from the hand [m]")  # fmt: skip
+    g.add_argument("--object-offset-yaw-deg", type=float,
+                   default=float(np.rad2deg(d.object_offset_yaw_rad)))  # fmt: skip
     _add_tracker_args(s)
 
     s = sub.add_parser("example", help="write the built-in synthetic example dataset")

@@ -355,3 +355,50 @@ def test_synthesize_refuses_existing_output(tmp_path, demo):
     (tmp_path / "o.lance").mkdir()
     with pytest.raises(DatasetError, match="overwrite"):
         run_synthesize(SynthesizeConfig(dataset=tmp_path / "x", out=tmp_path / "o.lance"))
+
+
+def test_cli_synthesize_expands_and_resumes(tmp_path, demo, capsys):
+    """Mild perturbations with the open-loop tracker keep rollouts; a crashed run resumes."""
+    from dexcanvas_core.cli import _sim_config, build_parser
+    from dexcanvas_core.sim.run import _synth_row
+
+    src = tmp_path / "src.lance"
+    short = demo.slice(150, 420)
+    write_dataset([short], src)
+    out = tmp_path / "syn.lance"
+    args = ["synthesize", "--dataset", str(src), "--expand", "2", "--out", str(out),
+            "--tracker", "open_loop", "--seed", "7", "--size", "0.05", "--mass", "0.05",
+            "--friction", "0.05", "--hand-scale", "0.01", "--object-offset", "0",
+            "--object-offset-yaw-deg", "0"]  # fmt: skip
+    # a crashed run finished this row before dying: the rerun reuses it instead of recomputing
+    ns = build_parser().parse_args(args)
+    from dexcanvas_core.sim.synthesis import PerturbationRanges
+
+    ranges = PerturbationRanges(size=0.05, mass=0.05, friction=0.05, hand=0.01,
+                                object_offset_m=0.0, object_offset_yaw_rad=0.0)  # fmt: skip
+    work = tmp_path / "syn.lance.work"
+    work.mkdir()
+    sim = _sim_config(ns)
+    (work / "settings.json").write_text(json.dumps(
+        {"dataset": str(src), "expand": 2, "seed": 7, "sim": sim.as_dict(),
+         "ranges": dataclasses.asdict(ranges)}))  # fmt: skip
+    uuid, kept, _ = _synth_row((str(src), 0, 2, 7, sim, ranges, str(work)))
+    assert kept >= 1
+    done = json.loads((work / f"{uuid}.json").read_text())
+    done[0]["reused"] = True  # marks the checkpoint so the test sees it was not recomputed
+    (work / f"{uuid}.json").write_text(json.dumps(done))
+    rc = dexcanvas_main(args)
+    assert rc == 0, capsys.readouterr().err
+    rows = list(open_dataset(out).iter_trajectories())
+    assert len(rows) == kept and all(r.is_generated and r.seed_uuid == short.uuid for r in rows)
+    assert len({r.uuid for r in rows}) == kept
+    report = json.loads((tmp_path / "syn.lance.report.json").read_text())
+    assert report["summary"]["rollouts"] == 2 and report["summary"]["kept"] == kept
+    assert report["rollouts"][0].get("reused") is True  # not recomputed
+    assert not work.exists()  # cleaned up once the final dataset is written
+    assert "kept" in capsys.readouterr().out
+    # a leftover work dir with other settings is refused
+    work.mkdir()
+    (work / "settings.json").write_text(json.dumps({"expand": 99}))
+    rc = dexcanvas_main([*args, "--overwrite"])
+    assert rc == 2 and "other settings" in capsys.readouterr().err

@@ -12,6 +12,7 @@ assembled atomically at the end.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
@@ -23,6 +24,7 @@ import numpy as np
 
 from dexcanvas_core.errors import DatasetError
 from dexcanvas_core.sim.pipeline import SimConfig, simulate
+from dexcanvas_core.sim.synthesis import PerturbationRanges
 
 
 def _atomic_write_text(path: Path, text: str) -> None:
@@ -133,6 +135,7 @@ class SynthesizeConfig:
     sim: SimConfig = field(default_factory=SimConfig)
     limit: int | None = None
     """Only the first ``limit`` source rows (for trials)."""
+    ranges: PerturbationRanges = field(default_factory=PerturbationRanges)
     overwrite: bool = False
     progress: bool = True
 
@@ -140,13 +143,13 @@ class SynthesizeConfig:
 def _synth_row(args) -> tuple[str, int, list[dict]]:
     """Worker: all rollouts of one source row, checkpointed as ``work/<uuid>.lance``."""
     from dexcanvas_core.io import open_dataset, write_dataset
-    from dexcanvas_core.sim.synthesis import PerturbationRanges, synthesize_one
+    from dexcanvas_core.sim.synthesis import synthesize_one
 
-    dataset, position, expand, seed, sim_cfg, work = args
+    dataset, position, expand, seed, sim_cfg, ranges, work = args
     traj = open_dataset(dataset).take([position])[0]
     kept, reports = [], []
     for i in range(expand):
-        tr, metrics = synthesize_one(traj, i, seed, sim_cfg, PerturbationRanges())
+        tr, metrics = synthesize_one(traj, i, seed, sim_cfg, ranges)
         reports.append(metrics)
         if tr is not None:
             kept.append(tr)
@@ -177,7 +180,7 @@ def run_synthesize(cfg: SynthesizeConfig) -> dict:
     work = out.with_name(out.name + ".work")
     work.mkdir(parents=True, exist_ok=True)
     settings = {"dataset": str(cfg.dataset), "expand": cfg.expand, "seed": cfg.seed,
-                "sim": cfg.sim.as_dict()}  # fmt: skip
+                "sim": cfg.sim.as_dict(), "ranges": dataclasses.asdict(cfg.ranges)}  # fmt: skip
     stamp = work / "settings.json"
     if stamp.exists() and json.loads(stamp.read_text()) != json.loads(json.dumps(settings)):
         raise DatasetError(
@@ -187,7 +190,9 @@ def run_synthesize(cfg: SynthesizeConfig) -> dict:
         )
     _atomic_write_text(stamp, json.dumps(settings, sort_keys=True))
     todo = [p for p in positions if not (work / f"{uuids[p]}.json").exists()]
-    jobs = [(str(cfg.dataset), p, cfg.expand, cfg.seed, cfg.sim, str(work)) for p in todo]
+    jobs = [
+        (str(cfg.dataset), p, cfg.expand, cfg.seed, cfg.sim, cfg.ranges, str(work)) for p in todo
+    ]
     with Progress(
         "[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
         TimeElapsedColumn(), disable=not cfg.progress,
