@@ -374,6 +374,9 @@ def heavy_vs_light(rows: list[dict]) -> dict:
         f_l, f_h = _hold_force(li), _hold_force(h)
         mass_ratio = h["mass_kg"] / li["mass_kg"]
         force_ratio = f_h / f_l if f_l and f_h else None
+        w_l, w_h = li["hold_weight_ratio"], h["hold_weight_ratio"]
+        # vertical load carried by the hand in the hold: weight ratio × m·g
+        load_ratio = (w_h * h["mass_kg"]) / (w_l * li["mass_kg"]) if w_l and w_h else None
         pairs.append(
             {
                 "pair": h["pair"],
@@ -389,6 +392,7 @@ def heavy_vs_light(rows: list[dict]) -> dict:
                 "hold_force_light_n": f_l,
                 "hold_force_heavy_n": f_h,
                 "force_ratio": force_ratio,
+                "load_ratio": load_ratio,
                 "force_ratio_over_mass_ratio": None
                 if force_ratio is None
                 else force_ratio / mass_ratio,
@@ -399,6 +403,7 @@ def heavy_vs_light(rows: list[dict]) -> dict:
         "pairs": pairs,
         "median_mass_ratio": _stat(_values(ok, "mass_ratio"), np.median),
         "median_force_ratio": _stat(_values(ok, "force_ratio"), np.median),
+        "median_load_ratio": _stat(_values(ok, "load_ratio"), np.median),
         "median_force_ratio_over_mass_ratio": _stat(
             _values(ok, "force_ratio_over_mass_ratio"), np.median
         ),
@@ -532,10 +537,12 @@ def heavy_table(hv: dict):
 
     t = Table(
         title="heavy vs light (clean demonstration, heavy object variant)",
-        caption=f"medians: mass ratio {_f(hv['median_mass_ratio'])}, hold-force ratio "
+        caption=f"medians: mass ratio {_f(hv['median_mass_ratio'])}, vertical load ratio "
+        f"{_f(hv['median_load_ratio'])}, hold-force ratio "
         f"{_f(hv['median_force_ratio'])}, force ratio / mass ratio "
         f"{_f(hv['median_force_ratio_over_mass_ratio'])}; hold force: sum over parts of the mean "
-        "contact-force magnitude in static-hold frames",
+        "contact-force magnitude in static-hold frames (grip squeeze included); vertical load: "
+        "mean upward hand force in the hold",
     )
     for c in (
         "pair",
@@ -544,13 +551,14 @@ def heavy_table(hv: dict):
         "mass ratio",
         "success l/h",
         "weight ratio % l/h",
+        "load ratio",
         "hold force N l/h",
         "force ratio",
     ):
         t.add_column(c, justify="left" if c in ("pair", "heavy") else "right", no_wrap=c == "pair")
     for p in hv["pairs"]:
         if "error" in p:
-            t.add_row(p["pair"], "", f"[red]{p['error']}[/red]", *[""] * 5)
+            t.add_row(p["pair"], "", f"[red]{p['error']}[/red]", *[""] * 6)
             continue
         t.add_row(
             p["pair"],
@@ -560,6 +568,7 @@ def heavy_table(hv: dict):
             f"{'y' if p['success_light'] else 'n'} / {'y' if p['success_heavy'] else 'n'}",
             f"{_f(p['hold_weight_ratio_light'], 100, '.1f')} / "
             f"{_f(p['hold_weight_ratio_heavy'], 100, '.1f')}",
+            _f(p["load_ratio"]),
             f"{_f(p['hold_force_light_n'])} / {_f(p['hold_force_heavy_n'])}",
             _f(p["force_ratio"]),
         )
