@@ -1,0 +1,162 @@
+"""Force matching: robot contact forces close to the human's that still move the object.
+
+Kinematic retargeting puts robot fingertips where the human's were; it says nothing about how
+hard they press. From the human trajectory's per-finger contact forces (the force pipeline's
+output, ``dexcanvas simulate``) this module
+
+1. chooses robot contact forces with a **contact-force distribution QP** (:func:`distribute`):
+   closest to the human forces of the corresponding fingers, subject to friction cones
+   (linearised, ``n_facets`` sides), non-negative normal forces and, when given, the robot's
+   joint torque limits ``|Σ J_iᵀ f_i| ≤ τ_max``, while producing the object wrench the human's
+   contacts produced (a heavily weighted least-squares term, so an infeasible request is met as
+   closely as possible and the shortfall reported rather than failing);
+2. turns them into joint position-target offsets through the servo gains,
+   ``Δq = K⁻¹ Σ_i J_iᵀ f_i`` (:func:`squeeze_offsets`): a position-controlled finger blocked by
+   the object then presses with ``f_i``.
+
+Fewer robot fingers than human ones (four-finger hands, grippers): the wrench term
+redistributes the missing fingers' share over the others; the shortfall says how much of the
+required wrench was out of reach.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from retarget.errors import RetargetError
+
+
+def _tangent_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    t1 = np.cross(n, a)
+    t1 /= np.linalg.norm(t1)
+    return t1, np.cross(n, t1)
+
+
+def grasp_matrix(points: np.ndarray, center: np.ndarray) -> np.ndarray:
+    """``(6, 3k)``: maps stacked contact forces to the wrench (force, torque about ``center``)."""
+    k = points.shape[0]
+    G = np.zeros((6, 3 * k))
+    for i, p in enumerate(points):
+        r = p - center
+        G[:3, 3 * i : 3 * i + 3] = np.eye(3)
+        G[3:, 3 * i : 3 * i + 3] = np.array(
+            [[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]]
+        )
+    return G
+
+
+@dataclass
+class ForceDistribution:
+    """Result of :func:`distribute` (world frame, forces on the object)."""
+
+    forces: np.ndarray  # (k, 3) [N]
+    wrench: np.ndarray  # (6,) produced [N, N·m]
+    wrench_required: np.ndarray  # (6,)
+    wrench_error: np.ndarray  # (6,) produced − required
+    tracking_error: np.ndarray  # (k,) ‖f_i − f_desired_i‖ [N]
+
+    @property
+    def force_shortfall_n(self) -> float:
+        return float(np.linalg.norm(self.wrench_error[:3]))
+
+    @property
+    def torque_shortfall_nm(self) -> float:
+        return float(np.linalg.norm(self.wrench_error[3:]))
+
+
+def distribute(
+    points: np.ndarray,
+    normals: np.ndarray,
+    f_desired: np.ndarray,
+    wrench_required: np.ndarray,
+    center: np.ndarray,
+    *,
+    mu: float = 0.8,
+    n_facets: int = 8,
+    jacobians: list[np.ndarray] | None = None,
+    tau_max: np.ndarray | None = None,
+    w_wrench: float = 100.0,
+    w_torque: float = 1e4,
+    f_max: float = 50.0,
+) -> ForceDistribution:
+    """The force-distribution QP (module docstring).
+
+    Args:
+        points: ``(k, 3)`` contact points [m]; ``normals``: ``(k, 3)`` the object's outward unit
+            normals there (a contact pushes along ``-n``).
+        f_desired: ``(k, 3)`` the human forces of the corresponding fingers [N].
+        wrench_required: ``(6,)`` force [N] and torque about ``center`` [N·m] to produce.
+        mu: friction coefficient of the linearised cones (inner pyramid, conservative).
+        jacobians, tau_max: optional ``(3, n)`` contact Jacobians over the robot's finger joints
+            and ``(n,)`` torque limits [N·m]: ``|Σ J_iᵀ f_i| ≤ τ_max``.
+        w_wrench, w_torque: weights of the force and torque parts of the wrench term (torques
+            in N·m are small numbers; ``w_torque`` puts them on the forces' scale).
+        f_max: bound on each force component [N] (keeps the QP bounded).
+    """
+    from qpsolvers import solve_qp
+
+    P_ = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    N_ = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    F_ = np.asarray(f_desired, dtype=np.float64).reshape(-1, 3)
+    W = np.asarray(wrench_required, dtype=np.float64).reshape(6)
+    k = P_.shape[0]
+    if N_.shape[0] != k or F_.shape[0] != k:
+        raise RetargetError(f"points, normals and f_desired must all have {k} rows")
+    for name, a in (("points", P_), ("normals", N_), ("f_desired", F_), ("wrench", W)):
+        if not np.isfinite(a).all():
+            raise RetargetError(f"force distribution: {name} has NaN or inf")
+    if k == 0:
+        return ForceDistribution(np.zeros((0, 3)), np.zeros(6), W, -W, np.zeros(0))
+    G = grasp_matrix(P_, np.asarray(center, dtype=np.float64))
+    Wd = np.diag([w_wrench] * 3 + [w_torque] * 3)
+    # ½ xᵀ P x + qᵀ x  with  ‖x − f_des‖² + (Gx − W)ᵀ Wd (Gx − W)
+    P = 2.0 * (np.eye(3 * k) + G.T @ Wd @ G)
+    q = -2.0 * (F_.reshape(-1) + G.T @ Wd @ W)
+    rows = []
+    angles = 2 * np.pi * np.arange(n_facets) / n_facets
+    c = np.cos(np.pi / n_facets)  # inner pyramid: facets inside the true cone
+    for i in range(k):
+        n = N_[i] / np.linalg.norm(N_[i])
+        u = -n  # direction the contact pushes the object
+        t1, t2 = _tangent_basis(u)
+        for a in angles:
+            g = np.zeros(3 * k)
+            # (cos a t1 + sin a t2)·f − μ cos(π/n) u·f ≤ 0
+            g[3 * i : 3 * i + 3] = np.cos(a) * t1 + np.sin(a) * t2 - mu * c * u
+            rows.append(g)
+        g = np.zeros(3 * k)
+        g[3 * i : 3 * i + 3] = -u  # u·f ≥ 0
+        rows.append(g)
+    Gin = np.array(rows)
+    hin = np.zeros(len(rows))
+    if jacobians is not None and tau_max is not None:
+        JT = np.concatenate([np.asarray(J, dtype=np.float64).T for J in jacobians], axis=1)
+        Gin = np.concatenate([Gin, JT, -JT])
+        hin = np.concatenate([hin, tau_max, tau_max])
+    x = solve_qp(P, q, Gin, hin, lb=np.full(3 * k, -f_max), ub=np.full(3 * k, f_max), solver="daqp")
+    if x is None:
+        raise RetargetError("force distribution QP found no solution")
+    f = x.reshape(k, 3)
+    wrench = G @ x
+    return ForceDistribution(
+        forces=f,
+        wrench=wrench,
+        wrench_required=W,
+        wrench_error=wrench - W,
+        tracking_error=np.linalg.norm(f - F_, axis=1),
+    )
+
+
+def squeeze_offsets(jacobians: list[np.ndarray], forces: np.ndarray, kp: np.ndarray) -> np.ndarray:
+    """``Δq = K⁻¹ Σ_i J_iᵀ f_i``: joint-target offsets [rad] that make position servos with
+    gains ``kp`` (``(n,)`` [N·m/rad], ``inf`` for joints without a servo) press with ``forces``
+    (``(k, 3)``, on the object) once the object blocks the fingers."""
+    tau = np.zeros(len(kp))
+    for J, f in zip(jacobians, np.asarray(forces).reshape(-1, 3), strict=True):
+        tau += np.asarray(J).T @ f
+    with np.errstate(divide="ignore"):
+        out = np.where(np.isfinite(kp) & (kp > 0), tau / np.where(kp > 0, kp, 1.0), 0.0)
+    return out

@@ -1,0 +1,152 @@
+"""Force matching: the contact-force distribution QP and the K⁻¹Jᵀf squeeze."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from retarget.errors import RetargetError
+from retarget.force_matching import distribute, grasp_matrix, squeeze_offsets
+
+G = 9.81
+
+
+def _box_grasp():
+    """Three contacts on a 6 cm box centred at the origin: thumb on −x, two fingers on +x."""
+    points = np.array([[-0.03, 0.0, 0.0], [0.03, 0.015, 0.0], [0.03, -0.015, 0.0]])
+    normals = np.array([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    return points, normals
+
+
+def _in_cones(f, normals, mu):
+    u = -normals
+    fn = np.einsum("ij,ij->i", f, u)
+    ft = np.linalg.norm(f - fn[:, None] * u, axis=1)
+    return np.all(fn >= -1e-9) and np.all(ft <= mu * fn + 1e-6)
+
+
+def test_qp_reproduces_a_required_wrench_inside_the_friction_cones():
+    points, normals = _box_grasp()
+    m = 0.3
+    W = np.array([0.0, 0.0, m * G, 0.0, 0.0, 0.0])  # hold the box against gravity
+    d = distribute(points, normals, np.zeros((3, 3)), W, np.zeros(3), mu=0.8)
+    np.testing.assert_allclose(d.wrench, W, atol=0.02 * m * G)
+    assert d.force_shortfall_n < 0.02 * m * G and d.torque_shortfall_nm < 1e-3
+    assert _in_cones(d.forces, normals, 0.8)
+    # the weight is shared by friction; the squeeze balances (no net x force)
+    assert d.forces[:, 2].sum() == pytest.approx(m * G, rel=0.02)
+    np.testing.assert_allclose(grasp_matrix(points, np.zeros(3)) @ d.forces.reshape(-1), d.wrench)
+
+
+def test_qp_keeps_human_forces_that_already_produce_the_wrench():
+    points, normals = _box_grasp()
+    f_h = np.array([[3.0, 0.0, 1.0], [-1.5, 0.0, 0.5], [-1.5, 0.0, 0.5]])
+    W = grasp_matrix(points, np.zeros(3)) @ f_h.reshape(-1)
+    d = distribute(points, normals, f_h, W, np.zeros(3), mu=1.0)
+    np.testing.assert_allclose(d.forces, f_h, atol=1e-3)
+    assert d.tracking_error.max() < 1e-3
+
+
+def test_missing_finger_is_redistributed_and_torque_limits_show_as_shortfall():
+    points, normals = _box_grasp()
+    f_h = np.array([[3.0, 0.0, 1.0], [-1.5, 0.0, 0.5], [-1.5, 0.0, 0.5]])
+    W = grasp_matrix(points, np.zeros(3)) @ f_h.reshape(-1)
+    # a hand without the third finger: two contacts must still lift the box
+    d = distribute(points[:2], normals[:2], f_h[:2], W, np.zeros(3), mu=1.0)
+    assert abs(d.wrench[2] - W[2]) < 0.05 and abs(d.wrench[0]) < 0.05
+    # joint torque limits too low for the load: the QP stays feasible and reports a shortfall
+    J = [np.eye(3) * 0.05, np.eye(3) * 0.05]  # 5 cm lever per joint, 3 joints per finger
+    tiny = distribute(points[:2], normals[:2], f_h[:2], W, np.zeros(3), mu=1.0,
+                      jacobians=[np.hstack([Ji, np.zeros((3, 3))]) if i == 0
+                                 else np.hstack([np.zeros((3, 3)), Ji])
+                                 for i, Ji in enumerate(J)],
+                      tau_max=np.full(6, 0.02))  # fmt: skip
+    assert tiny.force_shortfall_n > 0.5
+    tau = 0.05 * np.abs(tiny.forces).reshape(-1)
+    assert np.all(tau <= 0.02 + 1e-6)
+
+
+def test_bad_inputs_are_refused():
+    points, normals = _box_grasp()
+    with pytest.raises(RetargetError, match="NaN"):
+        distribute(points, normals, np.full((3, 3), np.nan), np.zeros(6), np.zeros(3))
+    with pytest.raises(RetargetError, match="rows"):
+        distribute(points, normals[:2], np.zeros((3, 3)), np.zeros(6), np.zeros(3))
+
+
+def _finger_pressing_a_fixed_box(solref: float):
+    """A two-joint finger with position servos above a fixed box (its distal link touching)."""
+    spec = mujoco.MjSpec()
+    spec.compiler.degree = False
+    spec.option.timestep = 0.002
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    b1 = spec.worldbody.add_body(name="l1", pos=[0, 0, 0.1], gravcomp=1)
+    b1.add_joint(name="j1", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0], damping=0.05,
+                 armature=1e-4)  # fmt: skip
+    b1.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0.05, 0, 0],
+                size=[0.008, 0, 0], density=1000)  # fmt: skip
+    b2 = b1.add_body(name="l2", pos=[0.05, 0, 0], gravcomp=1)
+    b2.add_joint(name="j2", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0], damping=0.05,
+                 armature=1e-4)  # fmt: skip
+    b2.add_geom(name="tip", type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0.04, 0, 0],
+                size=[0.008, 0, 0], density=1000)  # fmt: skip
+    spec.worldbody.add_geom(name="box", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.05, 0.05, 0.02],
+                            pos=[0.115, 0, 0.1 - 0.008 - 0.02])  # fmt: skip
+    for j, kp in (("j1", 5.0), ("j2", 3.0)):
+        a = spec.add_actuator(name=j, target=j, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        a.set_to_position(kp=kp, dampratio=1.0)
+    for g in spec.geoms:
+        g.solref = [solref, 1.0]
+    return spec.compile()
+
+
+def test_squeeze_offsets_press_with_the_intended_force():
+    """Δq = K⁻¹Jᵀf on a single finger against a fixed box: the contact force is the command
+    within 10 % (with the stiff contacts force matching runs with; soft default contacts let
+    the finger sink in and lose ~25 %)."""
+    m = _finger_pressing_a_fixed_box(solref=0.005)
+    d = mujoco.MjData(m)
+    kp = m.actuator_gainprm[:, 0]
+    for F in (1.0, 3.0, 6.0):
+        mujoco.mj_resetData(m, d)
+        mujoco.mj_forward(m, d)
+        # the distal link rests on the box; a vertical force's moment arms only depend on x
+        p = d.geom_xpos[m.geom("tip").id].copy()
+        jacp = np.zeros((3, m.nv))
+        mujoco.mj_jac(m, d, jacp, None, p, m.body("l2").id)
+        dq = squeeze_offsets([jacp], np.array([[0.0, 0.0, -F]]), kp)
+        d.ctrl[:] = dq
+        for _ in range(2000):
+            mujoco.mj_step(m, d)
+        fn = 0.0
+        for i in range(d.ncon):
+            f6 = np.zeros(6)
+            mujoco.mj_contactForce(m, d, i, f6)
+            fn += f6[0]
+        assert d.ncon >= 1 and fn == pytest.approx(F, rel=0.10)
+    # joints without a servo get no offset
+    out = squeeze_offsets([np.ones((3, 3))], np.ones((1, 3)), np.array([1.0, np.inf, 0.0]))
+    assert out[1] == 0.0 and out[2] == 0.0 and out[0] == pytest.approx(3.0)
+
+
+def test_soft_default_contacts_press_less_than_commanded():
+    """Why force matching stiffens contacts: at MuJoCo's default solref (0.02 s) the finger sinks
+    into the box and the servo loses part of its deflection."""
+    m = _finger_pressing_a_fixed_box(solref=0.02)
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    jacp = np.zeros((3, m.nv))
+    mujoco.mj_jac(m, d, jacp, None, d.geom_xpos[m.geom("tip").id].copy(), m.body("l2").id)
+    d.ctrl[:] = squeeze_offsets([jacp], np.array([[0.0, 0.0, -3.0]]), m.actuator_gainprm[:, 0])
+    for _ in range(2000):
+        mujoco.mj_step(m, d)
+    fn = sum(_normal(m, d, i) for i in range(d.ncon))
+    assert 0.6 * 3.0 < fn < 0.9 * 3.0
+
+
+def _normal(m, d, i) -> float:
+    f6 = np.zeros(6)
+    mujoco.mj_contactForce(m, d, i, f6)
+    return float(f6[0])
