@@ -114,6 +114,11 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
         help="output directory (default runs/<hand>_<object>_<type>_<index>)",
     )
     p.add_argument("--backend", choices=["pinocchio", "mink"], default="pinocchio")
+    p.add_argument(
+        "--forces",
+        action="store_true",
+        help="force matching: press like the human (runs the force pipeline first if needed)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     p.add_argument(
         "--snapshot",
@@ -154,6 +159,7 @@ def _plain_run_config(args: argparse.Namespace):
         index=args.index,
         out=args.out,
         backend=args.backend,
+        forces=args.forces,
         progress=not args.quiet,
     )
 

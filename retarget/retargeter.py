@@ -95,6 +95,13 @@ class RetargetConfig:
     max_joint_speed: float = 20.0
     """Velocity bound [rad/s or m/s] per joint."""
     squeeze_depth: float = 0.01
+    force_matching: bool = False
+    """Replace the depth squeeze by force matching (``retarget.force_matching``): the human's
+    per-finger contact forces (force pipeline output) distributed over the robot's contacts
+    by the force QP and applied through the servo gains, ``Δq = K⁻¹ Jᵀ f``. Needs a
+    trajectory with contact records carrying forces."""
+    force_mu: float = 0.8
+    """Friction coefficient of the force QP's (linearised, inner) cones."""
     """Grip: where the human touches the object, the robot's position *command* (``q_command``)
     presses each contacting finger this far [m] into the surface (along the surface normal,
     finger joints only), so that position servos produce a grip force. The kinematic solution
@@ -136,6 +143,12 @@ class RobotTrajectory:
     """(T, F) [m] where active: distance from the robot finger's surface point nearest the object
     to the human's contact point; NaN elsewhere."""
     solve_time_s: float
+    robot_force: np.ndarray | None = None
+    """(T, F, 3) [N] force matching's commanded contact force per robot finger (on the object)."""
+    human_force: np.ndarray | None = None
+    """(T, F, 3) [N] the human force of the finger each robot finger stands for."""
+    wrench_shortfall: np.ndarray | None = None
+    """(T,) [N] how far the commanded forces fall short of the human's object force."""
     meta: dict = field(default_factory=dict)
 
     @property
@@ -343,6 +356,7 @@ class Retargeter:
         has_obj = self.geometry is not None and bool(traj.objects)
         solve_s = 0.0
         self.smooth.set_previous(None)
+        fm = self._force_targets(traj) if self.cfg.force_matching and has_obj else None
         for t in range(T):
             if has_obj:
                 self.scene.set_object_pose(traj.object.pos[t], traj.object.rot_aa[t])
@@ -356,7 +370,10 @@ class Retargeter:
             n_it = self.cfg.first_frame_iterations if t == 0 else self.cfg.iterations
             t0 = time.perf_counter()
             q = self._solve_frame(q, n_it, traj.timestamp, t)
-            Qc[t] = q + self._squeeze(q, tg["contact_active"][t], tg["contact_normals"][t])
+            if fm is not None:
+                Qc[t] = q + self._force_squeeze(q, t, tg, fm)
+            else:
+                Qc[t] = q + self._squeeze(q, tg["contact_active"][t], tg["contact_normals"][t])
             solve_s += time.perf_counter() - t0
             self.smooth.set_previous(q)
             Q[t] = q
@@ -379,6 +396,9 @@ class Retargeter:
             contact_active=m["contact_active"],
             contact_err=m["contact_err"],
             solve_time_s=solve_s,
+            robot_force=None if fm is None else fm["robot_force"],
+            human_force=None if fm is None else fm["human_force"],
+            wrench_shortfall=None if fm is None else fm["shortfall"],
             meta={
                 "backend": self.cfg.backend,
                 "uuid": traj.uuid,
@@ -430,6 +450,81 @@ class Retargeter:
             "contact_active": active_all.copy(),
             "contact_err": c_err,
         }
+
+    def _force_targets(self, traj: Trajectory) -> dict:
+        """Per-frame human forces of the robot's fingers and the object wrench to reproduce."""
+        from dexcanvas_core.sim.scene import primitive_volume
+        from dexcanvas_core.trajectory import FORCE_GROUPS
+
+        c = traj.contacts
+        if c is None or c.num_records == 0 or traj.object_wrench_world is None:
+            raise RetargetError(
+                f"force matching needs the human's contact forces, and trajectory {traj.uuid} "
+                "has none: run it through the force pipeline first (dexcanvas simulate), or use "
+                "retarget run --forces, which does"
+            )
+        m = self.scene.model
+        kp = np.full(self.nq, np.inf)
+        tau_max = np.full(self.nq, np.inf)
+        for a in range(m.nu):
+            if m.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT:
+                continue
+            dof = m.jnt_dofadr[m.actuator_trnid[a, 0]]
+            if dof < 6 or dof >= self.nq:
+                continue
+            kp[dof] = m.actuator_gainprm[a, 0]
+            if m.actuator_forcelimited[a]:
+                tau_max[dof] = m.actuator_forcerange[a, 1]
+        T, F = traj.num_frames, len(self.tip_sites)
+        groups = c.finger_totals().astype(np.float64)  # (T, 6, 3) on the object, world
+        human = np.stack([groups[:, FORCE_GROUPS.index(f)] for f in self.tip_human], axis=1)
+        vols = np.array([primitive_volume(p.type, p.size) for p in self.geometry.primitives])
+        cents = np.array([p.pos for p in self.geometry.primitives])
+        return {
+            "kp": kp,
+            "tau_max": tau_max,
+            "human_force": human,
+            "wrench": traj.object_wrench_world.astype(np.float64),
+            "com_local": (vols[:, None] * cents).sum(0) / vols.sum(),
+            "robot_force": np.zeros((T, F, 3)),
+            "shortfall": np.zeros(T),
+            "R_obj": aa_to_matrix(traj.object.rot_aa.astype(np.float64)),
+            "p_obj": traj.object.pos.astype(np.float64),
+        }
+
+    def _force_squeeze(self, q: np.ndarray, t: int, tg: dict, fm: dict) -> np.ndarray:
+        """Joint offsets that make the servos press with the force QP's contact forces."""
+        from retarget.force_matching import distribute, squeeze_offsets
+
+        active = tg["contact_active"][t] & (np.linalg.norm(fm["human_force"][t], axis=1) > 1e-3)
+        W = fm["wrench"][t]
+        if not active.any():
+            fm["shortfall"][t] = float(np.linalg.norm(W[:3]))
+            return np.zeros(self.nq)
+        self.kin.forward(q)
+        pts = self.contacts.finger_points(q)
+        idx = np.flatnonzero(active)
+        fingers = np.isfinite(fm["kp"])
+        J = []
+        for i in idx:
+            Ji = self.kin.point_jacobian(*pts[i])[:, : self.nq].copy()
+            Ji[:, ~fingers] = 0.0  # the wrist and unservoed joints do not squeeze
+            J.append(Ji)
+        com = fm["p_obj"][t] + fm["R_obj"][t] @ fm["com_local"]
+        dist = distribute(
+            np.array([pts[i][1] for i in idx]),
+            tg["contact_normals"][t][idx],
+            fm["human_force"][t][idx],
+            W,
+            com,
+            mu=self.cfg.force_mu,
+            jacobians=[Ji[:, fingers] for Ji in J],
+            tau_max=np.minimum(fm["tau_max"][fingers], 1e3),
+        )
+        fm["robot_force"][t, idx] = dist.forces
+        fm["shortfall"][t] = dist.force_shortfall_n
+        dq = squeeze_offsets(J, dist.forces, np.where(fingers, fm["kp"], np.inf))
+        return np.clip(q + dq, self.lower, self.upper) - q
 
     def _squeeze(self, q: np.ndarray, active: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """Joint offset pressing each contacting finger ``squeeze_depth`` into the surface.

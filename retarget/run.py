@@ -43,6 +43,10 @@ class RunConfig:
     out: Path | None = None
     """Output directory; default ``runs/<hand>_<object>_<type>_<index>``."""
     backend: Literal["pinocchio", "mink"] = "pinocchio"
+    forces: bool = False
+    """Force matching: the robot presses like the human did (``retarget.force_matching``). A
+    demonstration without contact forces is first run through the force pipeline
+    (``dexcanvas_core.sim``, sampling MPC)."""
     progress: bool = True
     """Show progress bars and the summary on the terminal."""
 
@@ -71,25 +75,93 @@ def check_pair(hand, manipulation_type) -> None:
 
 
 def _load_demonstration(cfg: RunConfig, pair):
-    from dexcanvas_core.io import open_dataset
-    from dexcanvas_core.loaders.selection import select_rows
+    """The demonstration of ``pair``; for a heavy object without one of its own (the built-in
+    data has light objects only), the light object's demonstration, to be simulated with the
+    heavy object (same shape, its mass) — said on the terminal and in ``metrics.json``."""
+    from dexcanvas_core.errors import DatasetError
+    from dexcanvas_core.loaders.selection import load_demonstration
+    from dexcanvas_core.taxonomy import Pair
 
-    if cfg.dataset is None:
-        from dexcanvas_core.builtin import default_dataset_path
-
-        path = default_dataset_path()
-    else:
-        path = Path(cfg.dataset)
-    ds = open_dataset(path)
-    sel = select_rows(
-        ds, objects=[pair.object.id], manipulation_types=[pair.manipulation_type.name]
-    )
-    n = len(sel.positions)
-    if not 0 <= cfg.index < n:
-        raise RetargetError(
-            f"--index {cfg.index} out of range: {ds.path} has {n} demonstration(s) of {pair}"
+    try:
+        return load_demonstration(pair, cfg.index, cfg.dataset), None
+    except DatasetError as e:
+        base = pair.object.base_id
+        if not pair.object.heavy or base is None:
+            raise RetargetError(str(e)) from e
+        light = Pair.parse(f"{base}/{pair.manipulation_type.name}")
+        try:
+            traj = load_demonstration(light, cfg.index, cfg.dataset)
+        except DatasetError:
+            raise RetargetError(str(e)) from e
+        log.warning(
+            "no %s demonstration: using %s's with the %s object", pair, light, pair.object.id
         )
-    return ds.take([int(sel.positions[cfg.index])])[0]
+        return traj, str(light)
+
+
+FORCE_CONTACT_TIMECONST = 0.005
+"""Contact solref time constant [s] of force-matching re-simulations (see
+``tests/test_force_matching.py``: soft default contacts lose ~25 % of the pressed force)."""
+
+
+def _human_forces(traj, pair, prog):
+    """Run the force pipeline on ``traj`` (with ``pair``'s object) for the human's forces."""
+    from dexcanvas_core.sim.pipeline import SimConfig, simulate
+
+    task = prog.task("human forces (force pipeline)", traj.num_frames)
+    done = [0]
+
+    def step(n):
+        done[0] += n
+        if task is not None:
+            task(done[0], traj.num_frames)
+
+    res = simulate(traj, SimConfig(object_id=pair.object.id), progress=step)
+    m = {k: v for k, v in res.metrics.items() if k != "config"}
+    if not res.success:
+        raise RetargetError(
+            f"the force pipeline could not reproduce this demonstration with {pair.object.id} "
+            f"(object error > 5 cm at frame {m['failed_at_frame']}), so there are no human forces "
+            "to match; try another --index, or run without --forces"
+        )
+    return res.trajectory, m
+
+
+def force_metrics(robot, sim, human, retargeter) -> dict:
+    """Force preservation of a force-matched run: per corresponding finger, the correlation of
+    the human's and the re-simulated robot's contact-force magnitude profiles and their relative
+    magnitude error; the object force error (robot fingers' summed force vs the human hand's)
+    over frames where the human touches; contact precision/recall (robot finger in contact vs
+    human finger in contact); the share of frames whose required force the QP could produce
+    (shortfall below 10 % of it or 0.05 N)."""
+    from dexcanvas_core.trajectory import FORCE_GROUPS
+
+    H = np.linalg.norm(robot.human_force, axis=2)  # (T, F)
+    R = np.linalg.norm(sim.finger_force_world[:, : H.shape[1]], axis=2)
+    per = {}
+    for i, f in enumerate(retargeter.tip_human):
+        h, r = H[:, i], R[:, i]
+        on = (h > 0.05) | (r > 0.05)
+        corr = float(np.corrcoef(h[on], r[on])[0, 1]) if on.sum() > 2 and h[on].std() > 0 and (
+            r[on].std() > 0) else None  # fmt: skip
+        rel = float(np.abs(r[on] - h[on]).sum() / max(h[on].sum(), 1e-9)) if on.any() else None
+        per[f] = {"correlation": corr, "relative_magnitude_error": rel}
+    human_total = human.contacts.finger_totals()[:, : len(FORCE_GROUPS)].sum(axis=1)
+    robot_total = sim.finger_force_world.sum(axis=1)
+    touch = np.linalg.norm(human_total, axis=1) > 0.05
+    werr = np.linalg.norm(robot_total - human_total, axis=1)[touch]
+    hc, rc = H > 0.05, R > 0.05
+    need = np.linalg.norm(robot.human_force.sum(axis=1), axis=1)
+    ok = robot.wrench_shortfall <= np.maximum(0.1 * need, 0.05)
+    corrs = [v["correlation"] for v in per.values() if v["correlation"] is not None]
+    return {
+        "force_per_finger": per,
+        "force_correlation_mean": float(np.mean(corrs)) if corrs else None,
+        "object_force_error_mean_n": float(werr.mean()) if werr.size else None,
+        "contact_precision": float((hc & rc).sum() / max(rc.sum(), 1)),
+        "contact_recall": float((hc & rc).sum() / max(hc.sum(), 1)),
+        "wrench_feasible_fraction": float(ok[touch].mean()) if touch.any() else None,
+    }
 
 
 def _atomic_write_text(path: Path, text: str) -> None:
@@ -104,12 +176,12 @@ def run_retarget(cfg: RunConfig) -> dict:
     from dexcanvas_core.taxonomy import Pair
     from retarget.hands import get_hand
     from retarget.retargeter import RetargetConfig, Retargeter
-    from retarget.validate import Resimulator
+    from retarget.validate import Resimulator, ValidateConfig
 
     pair = Pair.parse(cfg.pair)
     hand = get_hand(cfg.hand)
     check_pair(hand, pair.manipulation_type)
-    traj = _load_demonstration(cfg, pair)
+    traj, substituted = _load_demonstration(cfg, pair)
     geometry = object_geometry(pair.object.id)
     out_dir = cfg.output_dir()
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -117,10 +189,16 @@ def run_retarget(cfg: RunConfig) -> dict:
     progress_ctx = _Progress(cfg.progress)
     with progress_ctx as prog:
         t0 = time.perf_counter()
-        retargeter = Retargeter(hand, geometry, RetargetConfig(backend=cfg.backend))
+        human_sim = None
+        if cfg.forces and (traj.contacts is None or traj.object_wrench_world is None):
+            traj, human_sim = _human_forces(traj, pair, prog)
+        retargeter = Retargeter(
+            hand, geometry, RetargetConfig(backend=cfg.backend, force_matching=cfg.forces)
+        )
         setup_s = time.perf_counter() - t0
         robot = retargeter.retarget(traj, progress=prog.task("retargeting", traj.num_frames))
-        sim = Resimulator(hand, geometry).run(
+        vcfg = ValidateConfig(contact_timeconst=FORCE_CONTACT_TIMECONST if cfg.forces else None)
+        sim = Resimulator(hand, geometry, vcfg).run(
             robot.q_command, traj, progress=prog.task("re-simulating", traj.num_frames)
         )
 
@@ -147,7 +225,12 @@ def run_retarget(cfg: RunConfig) -> dict:
         "ms_per_frame": robot.ms_per_frame,
         "setup_s": setup_s,
         "retarget_config": asdict(retargeter.cfg),
+        "demonstration_of": substituted or str(pair),
+        "forces": cfg.forces,
     }
+    if cfg.forces:
+        metrics.update(force_metrics(robot, sim, traj, retargeter))
+        metrics["human_force_pipeline"] = human_sim
     robot.meta["simulation"] = sim.meta
     _save(out_dir, robot, sim)
     _atomic_write_text(out_dir / "metrics.json", json.dumps(metrics, indent=2, sort_keys=True))

@@ -43,6 +43,9 @@ class ValidateConfig:
     """Time [s] the scene settles at the first frame (object resting, hand holding) first."""
     table: bool = True
     """Put a table (z = 0 plane) under the object."""
+    contact_timeconst: float | None = None
+    """Override every contact's ``solref`` time constant [s] (e.g. 0.005 for force matching:
+    stiff contacts keep the pressed force close to the ``K⁻¹Jᵀf`` command)."""
 
 
 @dataclass
@@ -97,12 +100,18 @@ class ValidationResult:
         }
 
 
-def build_sim_scene(hand, geometry, *, table: bool = True) -> mujoco.MjModel:
+def build_sim_scene(
+    hand, geometry, *, table: bool = True, contact_timeconst: float | None = None
+) -> mujoco.MjModel:
     """Hand with its actuators + the object as a free body (+ a table plane at z = 0)."""
     spec = hand.build_spec()
     if table:
         add_table(spec)
     add_object(spec, geometry, mocap=False)
+    if contact_timeconst is not None:
+        spec.option.enableflags |= mujoco.mjtEnableBit.mjENBL_OVERRIDE
+        spec.option.o_solref = [contact_timeconst, 1.0]
+        spec.option.o_margin = 0.0
     return spec.compile()
 
 
@@ -113,7 +122,9 @@ class Resimulator:
         self.hand = hand
         self.geometry = geometry
         self.cfg = config or ValidateConfig()
-        self.model = build_sim_scene(hand, geometry, table=self.cfg.table)
+        self.model = build_sim_scene(
+            hand, geometry, table=self.cfg.table, contact_timeconst=self.cfg.contact_timeconst
+        )
         m = self.model
         self.object_body = m.body(OBJECT_BODY).id
         jnt = m.body_jntadr[self.object_body]

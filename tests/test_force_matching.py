@@ -150,3 +150,74 @@ def _normal(m, d, i) -> float:
     f6 = np.zeros(6)
     mujoco.mj_contactForce(m, d, i, f6)
     return float(f6[0])
+
+
+@pytest.fixture(scope="module")
+def human_with_forces():
+    """The cube2/tripod demonstration annotated by the force pipeline (open-loop tracker)."""
+    from dexcanvas_core.demos import generate_demo
+    from dexcanvas_core.sim.pipeline import SimConfig, simulate
+
+    demo = generate_demo("cube2/tripod", "operator1", seed=0).trajectory
+    res = simulate(demo, SimConfig(tracker="open_loop"))
+    assert res.success
+    return res.trajectory
+
+
+def test_retargeter_matches_the_human_object_force(human_with_forces):
+    from dexcanvas_core.demos.geometry import object_geometry
+    from retarget.hands import get_hand
+    from retarget.retargeter import RetargetConfig, Retargeter
+
+    traj = human_with_forces.slice(300, 420)  # grasp held, object lifted
+    r = Retargeter(
+        get_hand("allegro"), object_geometry("cube2"), RetargetConfig(force_matching=True)
+    )
+    out = r.retarget(traj)
+    assert out.robot_force.shape == (traj.num_frames, len(r.tip_sites), 3)
+    touching = np.linalg.norm(out.human_force, axis=2).sum(1) > 0.1
+    assert touching.sum() > 50
+    # the commanded robot forces carry the human hand's object force (weight included)
+    human = traj.contacts.finger_totals()[:, :5].sum(1)
+    robot = out.robot_force.sum(1)
+    err = np.linalg.norm(robot - human, axis=1)[touching]
+    assert np.median(err) < 0.1 * np.median(np.linalg.norm(human, axis=1)[touching]) + 0.05
+    assert np.median(out.wrench_shortfall[touching]) < 0.1
+    # and become servo offsets on the contact frames only
+    dq = np.abs(out.q_command - out.q)[:, 6:].max(axis=1)
+    assert dq[touching].min() > 1e-4
+
+
+def test_force_matching_without_forces_says_what_to_do():
+    from dexcanvas_core.demos import generate_demo
+    from dexcanvas_core.demos.geometry import object_geometry
+    from retarget.hands import get_hand
+    from retarget.retargeter import RetargetConfig, Retargeter
+
+    demo = generate_demo("cube2/tripod", "operator1", seed=0).trajectory.slice(0, 20)
+    r = Retargeter(
+        get_hand("allegro"), object_geometry("cube2"), RetargetConfig(force_matching=True)
+    )
+    with pytest.raises(RetargetError, match="dexcanvas simulate"):
+        r.retarget(demo)
+
+
+def test_cli_run_forces_reports_force_preservation(human_with_forces, tmp_path):
+    import json
+
+    from dexcanvas_core.io import write_dataset
+    from retarget.cli import main
+
+    src = tmp_path / "h.lance"
+    write_dataset([human_with_forces], src)
+    out = tmp_path / "run"
+    rc = main(["run", "--hand", "allegro", "--pair", "cube2/tripod", "--dataset", str(src),
+               "--forces", "--quiet", "--out", str(out)])  # fmt: skip
+    assert rc == 0
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["forces"] and m["human_force_pipeline"] is None  # forces came with the dataset
+    for key in ("force_correlation_mean", "object_force_error_mean_n", "contact_precision",
+                "contact_recall", "wrench_feasible_fraction"):  # fmt: skip
+        assert m[key] is not None and np.isfinite(m[key])
+    assert set(m["force_per_finger"]) == {"thumb", "index", "middle", "ring"}
+    assert 0.0 <= m["contact_recall"] <= 1.0
