@@ -119,6 +119,11 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="force matching: press like the human (runs the force pipeline first if needed)",
     )
+    p.add_argument(
+        "--refine",
+        action="store_true",
+        help="if the re-simulation fails, refine the commands by sampling MPC on the robot",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     p.add_argument(
         "--snapshot",
@@ -160,6 +165,7 @@ def _plain_run_config(args: argparse.Namespace):
         out=args.out,
         backend=args.backend,
         forces=args.forces,
+        refine=args.refine,
         progress=not args.quiet,
     )
 

@@ -47,6 +47,10 @@ class RunConfig:
     """Force matching: the robot presses like the human did (``retarget.force_matching``). A
     demonstration without contact forces is first run through the force pipeline
     (``dexcanvas_core.sim``, sampling MPC)."""
+    refine: bool = False
+    """When the re-simulation fails, run the physics refinement (``retarget.refine``: the
+    force pipeline's sampling MPC on the robot hand) and report it next to the open-loop
+    result."""
     progress: bool = True
     """Show progress bars and the summary on the terminal."""
 
@@ -231,18 +235,32 @@ def run_retarget(cfg: RunConfig) -> dict:
     if cfg.forces:
         metrics.update(force_metrics(robot, sim, traj, retargeter))
         metrics["human_force_pipeline"] = human_sim
+    refined = None
+    if cfg.refine and not sim.success:
+        from retarget.refine import RefineConfig, refine
+
+        rcfg = RefineConfig(contact_timeconst=FORCE_CONTACT_TIMECONST if cfg.forces else None)
+        with _Progress(cfg.progress) as prog:
+            task = prog.task("refining (MPC on the robot)", 1)
+            refined = refine(hand, geometry, traj, robot, retargeter.tip_sites, rcfg)
+            if task is not None:
+                task(1, 1)
+        metrics["refine"] = refined.metrics()
+        metrics["success_refined"] = refined.success
     robot.meta["simulation"] = sim.meta
-    _save(out_dir, robot, sim)
+    _save(out_dir, robot, sim, refined)
     _atomic_write_text(out_dir / "metrics.json", json.dumps(metrics, indent=2, sort_keys=True))
     if cfg.progress:
         _print_summary(metrics, out_dir)
     return metrics
 
 
-def _save(out_dir: Path, robot, sim) -> None:
+def _save(out_dir: Path, robot, sim, refined=None) -> None:
+    extra = {} if refined is None else {"ctrl_refined": refined.ctrl}
     robot.save_npz(
         out_dir / "robot_trajectory.npz",
-        extra={
+        extra=extra
+        | {
             "object_pos_sim": sim.object_pos_sim,
             "object_rot_sim": sim.object_rot_sim,
             "object_pos_err": sim.object_pos_err,
@@ -311,6 +329,22 @@ def _print_summary(m: dict, out_dir: Path) -> None:
     )
     forces = ", ".join(f"{k} {v:.2f}" for k, v in m["finger_force_mean_n"].items())
     t.add_row("mean contact force [N]", forces)
+    if m.get("force_correlation_mean") is not None:
+        t.add_row(
+            "force matching",
+            f"correlation {m['force_correlation_mean']:.2f}, object force error "
+            f"{m['object_force_error_mean_n']:.2f} N, wrench feasible "
+            f"{100 * m['wrench_feasible_fraction']:.0f} % of contact frames",
+        )
+    if "refine" in m:
+        r = m["refine"]
+        ok = "[green]SUCCESS[/green]" if r["success"] else "[red]FAILED[/red]"
+        t.add_row(
+            "physics refinement",
+            f"{ok}: object error max {100 * r['object_pos_err_max_m']:.1f} cm; commands moved "
+            f"{np.degrees(r['finger_ctrl_deviation_mean_rad']):.1f}° (fingers), "
+            f"{1000 * r['wrist_pos_deviation_mean_m']:.1f} mm (wrist)",
+        )
     t.add_row("speed", f"{m['ms_per_frame']:.2f} ms/frame ({m['backend']})")
     t.add_row("written", f"{out_dir}/robot_trajectory.npz, metrics.json")
     Console().print(t)

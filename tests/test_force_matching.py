@@ -221,3 +221,31 @@ def test_cli_run_forces_reports_force_preservation(human_with_forces, tmp_path):
         assert m[key] is not None and np.isfinite(m[key])
     assert set(m["force_per_finger"]) == {"thumb", "index", "middle", "ring"}
     assert 0.0 <= m["contact_recall"] <= 1.0
+
+
+def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
+    """Allegro on the cube2/tripod lift: replayed open loop the cube slips out; the sampling
+    MPC on the robot hand keeps it, moving the commands by millimetres."""
+    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.loaders.selection import load_demonstration
+    from retarget.hands import get_hand
+    from retarget.refine import RefineConfig, refine
+    from retarget.retargeter import Retargeter
+
+    demo = load_demonstration("cube2/tripod")  # the built-in one
+    hand, geo = get_hand("allegro"), object_geometry("cube2")
+    rt = Retargeter(hand, geo)
+    robot = rt.retarget(demo)
+    # the default re-simulation's contacts (the stiff ones of force matching alone keep it)
+    soft = {"contact_timeconst": None}
+    replay = refine(hand, geo, demo, robot, rt.tip_sites, RefineConfig(tracker="open_loop", **soft))
+    assert replay.finger_ctrl_deviation_rad == 0.0 and replay.wrist_pos_deviation_m == 0.0
+    refined = refine(hand, geo, demo, robot, rt.tip_sites, RefineConfig(**soft))
+    assert not replay.success and replay.failed_at_frame is not None  # the cube slips out
+    assert refined.success and refined.object_pos_err.max() < 0.02
+    assert 0 < refined.wrist_pos_deviation_m < 0.03
+    assert refined.ctrl.shape == (demo.num_frames, hand.compile().nu)
+    m = refined.metrics()
+    assert m["frames_tracked"] == demo.num_frames and m["compute_s"] > 0
+    with pytest.raises(RetargetError, match="unknown refinement tracker"):
+        refine(hand, geo, demo, robot, rt.tip_sites, RefineConfig(tracker="ppo"))

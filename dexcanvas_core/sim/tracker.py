@@ -141,14 +141,46 @@ class TrackingEnv:
     lists of :attr:`log`.
     """
 
-    def __init__(self, scene, ref: Reference, cfg: TrackingConfig | None = None):
+    def __init__(
+        self,
+        scene,
+        ref: Reference,
+        cfg: TrackingConfig | None = None,
+        *,
+        ctrl_ref: np.ndarray | None = None,
+        basis: np.ndarray | None = None,
+        tip_weight: np.ndarray | None = None,
+        qpos0: np.ndarray | None = None,
+        tip_sensor_adr: int = 0,
+    ):
         self.scene = scene
         self.ref = ref
         self.cfg = TrackingConfig() if cfg is None else cfg
         if abs(ref.fps - scene.fps) > 1e-6:
             raise ValidationError(f"scene built for {scene.fps} fps, reference has {ref.fps}")
         m = scene.model
+        self.tip_sensor_adr = tip_sensor_adr
+        self.n_tips = ref.tips_object.shape[1]
+        self.rollout_data = mujoco.MjData(m)
+        self._state_spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        self._state = np.zeros(mujoco.mj_stateSize(m, self._state_spec))
+        self.ctrl_low = scene.hand.ctrl_low
+        self.ctrl_high = scene.hand.ctrl_high
+        if ctrl_ref is not None:
+            # another plant (e.g. a robot hand): targets, residual basis and contact weights
+            # come from the caller; nothing MANO-specific below applies
+            if basis is None or tip_weight is None:
+                raise ValidationError("ctrl_ref needs basis and tip_weight too")
+            self.ctrl_ref = np.asarray(ctrl_ref, dtype=np.float64)
+            self.M = np.asarray(basis, dtype=np.float64)
+            self.tip_weight = np.asarray(tip_weight, dtype=np.float64)
+            self.grip_force = np.zeros_like(self.tip_weight)
+            self.qpos0 = self.ctrl_ref[0] if qpos0 is None else np.asarray(qpos0)
+            self.action_dim = self.M.shape[-1]
+            self.reset()
+            return
         self.M = action_matrix(self.cfg)
+        self.action_dim = ACTION_DIM
         tip_geoms = [g for g, p in scene.hand.geom_part.items() if p.endswith(("_dip", "_ip"))]
         tip_radius = np.array(
             [
@@ -170,12 +202,13 @@ class TrackingEnv:
             self.ctrl_ref = self.ctrl_ref + offsets
         if not np.isfinite(ref.tips_object).all():
             self.tip_weight[:] = 0.0
-        self.ctrl_low = scene.hand.ctrl_low
-        self.ctrl_high = scene.hand.ctrl_high
-        self.rollout_data = mujoco.MjData(m)
-        self._state_spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-        self._state = np.zeros(mujoco.mj_stateSize(m, self._state_spec))
+        self.qpos0 = self.ctrl_ref[0]
         self.reset()
+
+    def offset(self, t: int, u: np.ndarray) -> np.ndarray:
+        """Actuator-target offsets of residuals ``u`` (``(A,)`` or ``(K, A)``) at frame ``t``."""
+        M = self.M if self.M.ndim == 2 else self.M[min(t, self.M.shape[0] - 1)]
+        return u @ M.T
 
     # -- state ----------------------------------------------------------------------------
 
@@ -183,13 +216,13 @@ class TrackingEnv:
         sc, ref, cfg = self.scene, self.ref, self.cfg
         m, d = sc.model, sc.data
         mujoco.mj_resetData(m, d)
-        d.qpos[sc.hand.qpos_adr] = self.ctrl_ref[0]
+        d.qpos[sc.hand.qpos_adr] = self.qpos0
         a = sc.object_qpos_adr
         d.qpos[a : a + 3] = ref.object_pos[0]
         d.qpos[a + 3 : a + 7] = ref.object_quat[0]
         d.ctrl[sc.hand.actuator] = self._clip(self.ctrl_ref[0])
         mujoco.mj_forward(m, d)
-        self.u = np.zeros(ACTION_DIM)
+        self.u = np.zeros(self.action_dim)
         self.t = 0
         self.failed_at: int | None = None
         self.log = TrackLog()
@@ -207,7 +240,7 @@ class TrackingEnv:
         mujoco.mj_forward(m, d)
         acc = FrameAccumulator(1)
         acc.add(read_contacts(sc, d), d.xipos[sc.object_body].copy())
-        self._record(finish_frame(acc), self.ctrl_ref[0], np.zeros(ACTION_DIM))
+        self._record(finish_frame(acc), self.ctrl_ref[0], np.zeros(self.action_dim))
 
     def state(self) -> np.ndarray:
         mujoco.mj_getState(self.scene.model, self.scene.data, self._state, self._state_spec)
@@ -244,13 +277,14 @@ class TrackingEnv:
         starting at the current frame and residual."""
         K, H, _ = actions.shape
         T = self.ref.num_frames
-        u = np.broadcast_to(self.u, (K, ACTION_DIM)).copy()
+        u = np.broadcast_to(self.u, (K, self.action_dim)).copy()
         tau = self.cfg.tau
         ctrl = np.empty((K, H, self.scene.model.nu))
         act_ids = self.scene.hand.actuator
         for h in range(H):
             u = np.clip(tau * u + actions[:, h], -1.0, 1.0)
-            target = self.ctrl_ref[min(self.t + 1 + h, T - 1)] + u @ self.M.T
+            f = min(self.t + 1 + h, T - 1)
+            target = self.ctrl_ref[f] + self.offset(f, u)
             ctrl[:, h][:, act_ids] = self._clip(target)
         return np.repeat(ctrl, self.scene.substeps, axis=1)
 
@@ -268,7 +302,8 @@ class TrackingEnv:
         )
         a = 1 + sc.object_qpos_adr  # state = [time, qpos, qvel, ...]
         k = slice(sc.substeps - 1, None, sc.substeps)
-        tips = sens[:, k, : 3 * len(FINGERS)].reshape(*sens[:, k].shape[:2], len(FINGERS), 3)
+        a0 = self.tip_sensor_adr
+        tips = sens[:, k, a0 : a0 + 3 * self.n_tips].reshape(*sens[:, k].shape[:2], self.n_tips, 3)
         return state[:, k, a : a + 7], tips
 
     def rewards(self, poses: np.ndarray, tips: np.ndarray, actions: np.ndarray) -> np.ndarray:
@@ -284,7 +319,7 @@ class TrackingEnv:
         if c.contact_reward:
             w = self.tip_weight[idx]  # (H, 5)
             dist = np.linalg.norm(tips - self.ref.tips_object[idx], axis=-1)  # (K, H, 5)
-            r += c.contact_reward * np.sum(w * np.exp(-c.contact_k * dist), axis=-1) / len(FINGERS)
+            r += c.contact_reward * np.sum(w * np.exp(-c.contact_k * dist), axis=-1) / self.n_tips
         if c.residual_penalty:
             u = np.broadcast_to(self.u, actions[:, 0].shape).copy()
             for h in range(H):
@@ -300,13 +335,13 @@ class TrackingEnv:
         """Advance one data frame with residual action ``a (11,)``; returns the reward."""
         if self.done:
             raise ValidationError("the tracking episode is over; call reset()")
-        a = np.asarray(a, dtype=np.float64).reshape(ACTION_DIM)
+        a = np.asarray(a, dtype=np.float64).reshape(self.action_dim)
         if not np.isfinite(a).all():
             raise ValidationError("tracker returned a non-finite action", field="action")
         sc = self.scene
         m, d = sc.model, sc.data
         self.u = np.clip(self.cfg.tau * self.u + a, -1.0, 1.0)
-        target = self.ctrl_ref[self.t + 1] + self.M @ self.u
+        target = self.ctrl_ref[self.t + 1] + self.offset(self.t + 1, self.u)
         d.ctrl[sc.hand.actuator] = self._clip(target)
         acc = FrameAccumulator(sc.substeps)
         for _ in range(sc.substeps):
@@ -410,7 +445,7 @@ class OpenLoop:
         pass
 
     def act(self, env: TrackingEnv) -> np.ndarray:
-        return np.zeros(ACTION_DIM)
+        return np.zeros(env.action_dim)
 
 
 @dataclass(frozen=True)
@@ -455,10 +490,12 @@ class SamplingMPC:
         c = self.cfg
         self.H = max(2, round(c.horizon_s * env.ref.fps))
         self.replan = max(1, round(c.replan_s * env.ref.fps))
-        self.plan = np.zeros((self.H, ACTION_DIM))
+        self.plan = np.zeros((self.H, env.action_dim))
         self.plan_t = env.t
         self.rng = np.random.default_rng(c.seed)
-        self.sigma = np.array([c.noise] * 3 + [c.noise_wrist_rot] * 3 + [c.noise_finger] * 5)
+        self.sigma = np.array(
+            [c.noise] * 3 + [c.noise_wrist_rot] * 3 + [c.noise_finger] * (env.action_dim - 6)
+        )
         knot_t = np.linspace(0, self.H - 1, c.knots) if c.knots > 1 else np.zeros(1)
         # (H, knots) linear interpolation weights
         self.interp = np.stack(
@@ -479,7 +516,7 @@ class SamplingMPC:
         nominal = np.zeros_like(self.plan)
         if shift < self.H:
             nominal[: self.H - shift] = self.plan[shift:]
-        eps = self.rng.standard_normal((c.samples, c.knots, ACTION_DIM)) * self.sigma
+        eps = self.rng.standard_normal((c.samples, c.knots, env.action_dim)) * self.sigma
         eps[:2] = 0.0
         actions = nominal[None] + np.einsum("hk,nka->nha", self.interp, eps)
         # sample 1: return to the reference at once (u = 0 from the next frame on)

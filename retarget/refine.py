@@ -1,0 +1,274 @@
+"""Physics refinement: the force pipeline's sampling MPC run on the robot hand itself.
+
+For pairs whose open-loop replay fails (the object slips or falls), the retargeted servo
+commands become the *reference* of the tracker of :mod:`dexcanvas_core.sim.tracker`, in the
+robot's own scene (its actuators, the object free on the table, the re-simulation's contact
+settings). The residual action is the wrist pose (3 × 3 cm, 3 × 0.15 rad) plus one scale per
+robot finger on its force-matching / squeeze offset (``u_f = +1`` presses twice as hard,
+``−1`` not at all); the reward is the tracker's (object pose, the robot fingertips staying where
+the retargeting put them relative to the object on contact frames, action and residual size).
+
+The refined commands are what the rollout executed; :class:`RefineResult` says how far they
+moved from the retargeted ones (joint deviation), so users see what physics cost.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from dexcanvas_core.rotations import aa_to_quat_wxyz
+from dexcanvas_core.sim.scene import (
+    OBJECT_ANCHOR,
+    OBJECT_BODY,
+    PhysicsSettings,
+    SimScene,
+    add_object,
+    add_table,
+)
+from dexcanvas_core.sim.tracker import (
+    MPCConfig,
+    OpenLoop,
+    SamplingMPC,
+    TrackingConfig,
+    TrackingEnv,
+    track,
+)
+from dexcanvas_core.trajectory import CONTACT_PARTS
+from retarget.errors import RetargetError
+from retarget.hands.base import WRIST_BODY
+
+
+@dataclass(frozen=True)
+class RefineConfig:
+    tracker: str = "mpc"
+    """``mpc``, or ``open_loop`` (the retargeted commands replayed in the same scene: the
+    baseline the refinement is measured against)."""
+    mpc: MPCConfig = field(default_factory=MPCConfig)
+    tracking: TrackingConfig = field(default_factory=TrackingConfig)
+    scale_pos_m: float = 0.03
+    scale_rot_rad: float = 0.15
+    contact_timeconst: float | None = 0.005
+    """Contact solref time constant [s] (the force-matching re-simulation's); None: defaults."""
+    max_timestep_s: float = 0.0025
+
+
+@dataclass
+class _Plant:
+    """The robot hand's ids in the refinement scene (the tracker's ``scene.hand``)."""
+
+    qpos_adr: np.ndarray
+    dof_adr: np.ndarray
+    actuator: np.ndarray
+    ctrl_low: np.ndarray
+    ctrl_high: np.ndarray
+    geom_part: dict
+    tip_sites: np.ndarray
+    palm_body: int
+
+
+@dataclass
+class _Reference:
+    fps: float
+    object_pos: np.ndarray
+    object_quat: np.ndarray
+    tips_object: np.ndarray
+
+    @property
+    def num_frames(self) -> int:
+        return self.object_pos.shape[0]
+
+
+@dataclass
+class RefineResult:
+    success: bool
+    failed_at_frame: int | None
+    object_pos_err: np.ndarray
+    object_rot_err: np.ndarray
+    ctrl: np.ndarray
+    """(T, nu) the refined servo commands (actuator order)."""
+    ctrl_reference: np.ndarray
+    finger_ctrl_deviation_rad: float
+    wrist_pos_deviation_m: float
+    wrist_rot_deviation_rad: float
+    compute_s: float
+
+    def metrics(self) -> dict:
+        return {
+            "success": self.success,
+            "failed_at_frame": self.failed_at_frame,
+            "frames_tracked": int(self.object_pos_err.shape[0]),
+            "object_pos_err_max_m": float(self.object_pos_err.max()),
+            "object_pos_err_mean_m": float(self.object_pos_err.mean()),
+            "object_rot_err_mean_rad": float(self.object_rot_err.mean()),
+            "finger_ctrl_deviation_mean_rad": self.finger_ctrl_deviation_rad,
+            "wrist_pos_deviation_mean_m": self.wrist_pos_deviation_m,
+            "wrist_rot_deviation_mean_rad": self.wrist_rot_deviation_rad,
+            "compute_s": self.compute_s,
+        }
+
+
+def _part_of(human_finger: str | None) -> str:
+    if human_finger is None:
+        return "palm"
+    return "thumb_ip" if human_finger == "thumb" else f"{human_finger}_dip"
+
+
+def build_refine_scene(hand, geometry, fps: float, cfg: RefineConfig, tip_sites: list[str]):
+    """The robot hand + free object + table, a weld anchor, fingertip-in-object sensors."""
+    spec = hand.build_spec()
+    substeps = max(1, int(np.ceil(1.0 / (fps * cfg.max_timestep_s) - 1e-9)))
+    spec.option.timestep = 1.0 / (fps * substeps)
+    add_table(spec)
+    add_object(spec, geometry, mocap=False)
+    anchor = spec.worldbody.add_body(name=OBJECT_ANCHOR, mocap=True)
+    anchor.add_site(name="object_anchor_site", size=[0.002, 0, 0])
+    eq = spec.add_equality(
+        name="object_hold", type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
+        name1=OBJECT_BODY, name2=OBJECT_ANCHOR,
+    )  # fmt: skip
+    eq.active = False
+    first_sensor = len(spec.sensors)
+    for s in tip_sites:
+        spec.add_sensor(
+            name=f"refine_{s}", type=mujoco.mjtSensor.mjSENS_FRAMEPOS,
+            objtype=mujoco.mjtObj.mjOBJ_SITE, objname=s,
+            reftype=mujoco.mjtObj.mjOBJ_BODY, refname=OBJECT_BODY,
+        )  # fmt: skip
+    if cfg.contact_timeconst is not None:
+        spec.option.enableflags |= mujoco.mjtEnableBit.mjENBL_OVERRIDE
+        spec.option.o_solref = [cfg.contact_timeconst, 1.0]
+        spec.option.o_margin = 0.0
+    m = spec.compile()
+    obj = m.body(OBJECT_BODY).id
+    jnt = m.body_jntadr[obj]
+    obj_q = int(m.jnt_qposadr[jnt])
+    hand_joints = [j for j in range(m.njnt) if m.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE]
+    parts = hand.hand_parts(m)
+    robot_to_human = {r: h for h, r in hand.fingers.items() if r is not None}
+    geom_part = {}
+    for finger, bodies in parts.items():
+        part = _part_of(robot_to_human.get(finger)) if finger != "palm" else "palm"
+        assert part in CONTACT_PARTS
+        ids = {m.body(b).id for b in bodies}
+        for g in range(m.ngeom):
+            if m.geom_bodyid[g] in ids and (m.geom_contype[g] or m.geom_conaffinity[g]):
+                geom_part[g] = part
+    lo = np.where(m.actuator_ctrllimited, m.actuator_ctrlrange[:, 0], -np.inf)
+    hi = np.where(m.actuator_ctrllimited, m.actuator_ctrlrange[:, 1], np.inf)
+    plant = _Plant(
+        qpos_adr=np.array([m.jnt_qposadr[j] for j in hand_joints], dtype=np.int64),
+        dof_adr=np.array([m.jnt_dofadr[j] for j in hand_joints], dtype=np.int64),
+        actuator=np.arange(m.nu),
+        ctrl_low=lo,
+        ctrl_high=hi,
+        geom_part=geom_part,
+        tip_sites=np.array([m.site(s).id for s in tip_sites]),
+        palm_body=m.body(WRIST_BODY).id,
+    )
+    scene = SimScene(
+        model=m,
+        data=mujoco.MjData(m),
+        hand=plant,
+        geometry=geometry,
+        object_body=obj,
+        object_qpos_adr=obj_q,
+        object_dof_adr=int(m.jnt_dofadr[jnt]),
+        object_geoms=np.flatnonzero(m.geom_bodyid == obj),
+        table_geom=m.geom("table").id,
+        anchor_mocap=int(m.body_mocapid[m.body(OBJECT_ANCHOR).id]),
+        weld_eq=m.equality("object_hold").id,
+        fps=fps,
+        physics=PhysicsSettings(substeps=substeps, max_timestep_s=cfg.max_timestep_s),
+    )
+    return scene, int(m.sensor_adr[first_sensor]) if tip_sites else 0
+
+
+def refine(hand, geometry, human, robot, tip_sites: list[str], cfg: RefineConfig | None = None):
+    """Refine ``robot`` (a ``RobotTrajectory`` of ``human``) by sampling MPC (module doc)."""
+    cfg = RefineConfig() if cfg is None else cfg
+    if cfg.tracker not in ("mpc", "open_loop"):
+        raise RetargetError(f"unknown refinement tracker {cfg.tracker!r}; use mpc or open_loop")
+    if not human.objects:
+        raise RetargetError("refinement needs a demonstration with an object")
+    scene, adr = build_refine_scene(hand, geometry, human.fps, cfg, tip_sites)
+    m = scene.model
+    act_q = np.array([m.jnt_qposadr[m.actuator_trnid[a, 0]] for a in range(m.nu)])
+    if (m.actuator_trntype != mujoco.mjtTrn.mjTRN_JOINT).any():
+        raise RetargetError(f"refinement supports joint-driven servos only ({hand.name})")
+    T = human.num_frames
+    ctrl_ref = robot.q_command[:, act_q]
+    offsets = (robot.q_command - robot.q)[:, act_q]
+    F = len(tip_sites)
+    basis = np.zeros((T, m.nu, 6 + F))
+    for a in range(m.nu):
+        if act_q[a] < 6:
+            basis[:, a, act_q[a]] = cfg.scale_pos_m if act_q[a] < 3 else cfg.scale_rot_rad
+    parts = hand.hand_parts(m)
+    robot_fingers = [hand.fingers[f] for f in _human_fingers(hand, tip_sites)]
+    for i, rf in enumerate(robot_fingers):
+        ids = {m.body(b).id for b in parts.get(rf, [])}
+        for a in range(m.nu):
+            if m.jnt_bodyid[m.actuator_trnid[a, 0]] in ids:
+                basis[:, a, 6 + i] = offsets[:, a]
+    R_o = np.stack([_rotm(q) for q in aa_to_quat_wxyz(human.object.rot_aa.astype(np.float64))])
+    p_o = human.object.pos.astype(np.float64)
+    tips_obj = np.einsum("tji,tfj->tfi", R_o, robot.tip_pos_world - p_o[:, None])
+    w = robot.contact_active.astype(np.float64)
+    n = max(1, round(0.1 * human.fps))
+    k = np.ones(n) / n
+    w = np.stack([np.convolve(np.pad(c, (n // 2, n - 1 - n // 2), mode="edge"), k, "valid")
+                  for c in w.T], axis=1)  # fmt: skip
+    ref = _Reference(
+        fps=human.fps,
+        object_pos=p_o,
+        object_quat=aa_to_quat_wxyz(human.object.rot_aa.astype(np.float64)),
+        tips_object=tips_obj,
+    )
+    env = TrackingEnv(
+        scene, ref, cfg.tracking, ctrl_ref=ctrl_ref, basis=basis, tip_weight=w,
+        qpos0=robot.q_command[0], tip_sensor_adr=adr,
+    )  # fmt: skip
+    t0 = time.process_time()
+    log = track(env, SamplingMPC(cfg.mpc) if cfg.tracker == "mpc" else OpenLoop())
+    cpu = time.process_time() - t0
+    ctrl = np.asarray(log.ctrl)
+    Tt = ctrl.shape[0]
+    dev = np.abs(ctrl - ctrl_ref[:Tt])
+    wrist_pos = [a for a in range(m.nu) if act_q[a] < 3]
+    wrist_rot = [a for a in range(m.nu) if 3 <= act_q[a] < 6]
+    fingers = [a for a in range(m.nu) if act_q[a] >= 6]
+    pos_err = np.asarray(log.pos_err)
+    return RefineResult(
+        success=env.failed_at is None and Tt == T and bool((pos_err <= 0.05).all()),
+        failed_at_frame=env.failed_at,
+        object_pos_err=pos_err,
+        object_rot_err=np.asarray(log.rot_err),
+        ctrl=ctrl,
+        ctrl_reference=ctrl_ref,
+        finger_ctrl_deviation_rad=float(dev[:, fingers].mean()) if fingers else 0.0,
+        wrist_pos_deviation_m=float(np.linalg.norm(dev[:, wrist_pos], axis=1).mean()),
+        wrist_rot_deviation_rad=float(np.linalg.norm(dev[:, wrist_rot], axis=1).mean()),
+        compute_s=cpu,
+    )
+
+
+def _human_fingers(hand, tip_sites: list[str]) -> list[str]:
+    """The human finger of each tip site (``{robot_finger}_tip_site``), in order."""
+    robot_to_human = {r: h for h, r in hand.fingers.items() if r is not None}
+    out = []
+    for s in tip_sites:
+        rf = s.removesuffix("_tip_site")
+        if rf not in robot_to_human:
+            raise RetargetError(f"tip site {s!r} belongs to no mapped finger of {hand.name}")
+        out.append(robot_to_human[rf])
+    return out
+
+
+def _rotm(q: np.ndarray) -> np.ndarray:
+    R = np.zeros(9)
+    mujoco.mju_quat2Mat(R, q)
+    return R.reshape(3, 3)
