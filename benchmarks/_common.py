@@ -1,10 +1,19 @@
-"""Helpers shared by the benchmarks: the demonstration suite and atomic JSON output.
+"""Helpers shared by the benchmarks: the demonstration suites, re-simulation, terminal and
+JSON output.
 
-The suite is the built-in generator's (``dexcanvas_core.demos``): ``pick_pairs`` takes feasible
-(object, manipulation type) pairs round-robin over the 21 types (shuffled within a type by the
-seed), ``generate_one`` generates the demonstration of the ``i``-th pair with operator
-``i mod 5`` and seed ``seed + i`` (retrying an infeasible seed), so every benchmark that uses
-them sees the same demonstrations for the same ``--seed``.
+Two suites of the built-in generator (``dexcanvas_core.demos``):
+
+* by manipulation type (``benchmarks/force_pipeline.py``, ``mocap_fit.py``): ``pick_pairs``
+  takes feasible (object, manipulation type) pairs round-robin over the 21 types (shuffled within
+  a type by the seed), ``generate_one`` generates the demonstration of the ``i``-th pair with
+  operator ``i mod 5`` and seed ``seed + i`` (retrying an infeasible seed), so every benchmark
+  that uses them sees the same demonstrations for the same ``--seed``;
+* by group (``retarget_speed_quality.py``, ``force_preservation.py``): ``load_demonstrations``
+  takes pairs in ``select_pairs`` order (spread evenly over power, intermediate, precision and
+  in-hand), one operator and seed, each demonstration cropped by ``crop_demo``.
+
+``resim`` re-simulates a robot joint trajectory (``retarget.validate.Resimulator``) and adds the
+hand-below-the-table diagnostic (``table_penetration``).
 """
 
 from __future__ import annotations
@@ -12,6 +21,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
@@ -96,3 +106,175 @@ def atomic_write_json(path: Path, obj) -> None:
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(json.dumps(obj, indent=2, default=json_default))
     os.replace(tmp, path)
+
+
+# ------------------------------------------------------------------ the group-spread suite
+def select_pairs(pairs) -> list:
+    """The order in which pairs are taken, spreading them over the four groups deterministically.
+
+    Within a group: round robin over its manipulation types (catalogue order); each type walks
+    its objects starting at an offset that differs per type, so types do not all pick the same
+    object. Groups are then interleaved (power, intermediate, precision, in-hand, power, …).
+    Returns every pair in that order; callers take the first ``n`` that work, per group quota.
+    """
+    from dexcanvas_core.taxonomy import GROUPS
+
+    by_group: dict[str, dict[str, list]] = {g: defaultdict(list) for g in GROUPS}
+    for p in pairs:
+        by_group[p.manipulation_type.group][p.manipulation_type.name].append(p)
+    group_orders = {}
+    for g, types in by_group.items():
+        order = []
+        lists = list(types.values())
+        depth = max((len(x) for x in lists), default=0)
+        for r in range(depth):
+            for k, objs in enumerate(lists):
+                if r < len(objs):
+                    order.append(objs[(r + 3 * k) % len(objs)])
+        group_orders[g] = order
+    out = []
+    depth = max((len(o) for o in group_orders.values()), default=0)
+    for r in range(depth):
+        for g in GROUPS:
+            if r < len(group_orders[g]):
+                out.append(group_orders[g][r])
+    return out
+
+
+def crop_demo(traj, max_frames: int | None):
+    """At most ``max_frames`` frames, starting a third of the window before the object moves."""
+    if max_frames is None or traj.num_frames <= max_frames:
+        return traj
+    start, _ = traj.active_range()
+    s = int(np.clip(start - max_frames // 3, 0, traj.num_frames - max_frames))
+    return traj.slice(s, s + max_frames)
+
+
+def load_demonstrations(cfg, console) -> tuple[list, str, list[dict]]:
+    """``[(pair, trajectory)]``, the demonstrations' source, and the pairs that failed.
+
+    ``cfg``: any object with ``n_pairs``, ``operator``, ``seed`` and ``max_frames`` (the
+    benchmarks' ``BenchConfig``s). ``n_pairs`` generated demonstrations of the pairs in
+    :func:`select_pairs` order, an equal quota per group, each cropped by :func:`crop_demo`.
+    """
+    from dexcanvas_core.taxonomy import GROUPS
+
+    try:
+        from dexcanvas_core.demos import feasible_pairs, generate_demo
+    except ImportError as e:
+        console.print(
+            f"[yellow]note:[/yellow] dexcanvas_core.demos has no generate_demo/feasible_pairs "
+            f"yet ({e}); falling back to dexcanvas_core.example (6 pick-and-place pairs, no "
+            "in-hand group)"
+        )
+        from dexcanvas_core.example import example_trajectories
+        from dexcanvas_core.taxonomy import Pair
+
+        seen, out = set(), []
+        for traj in example_trajectories(seed=cfg.seed):
+            if traj.operator != cfg.operator or traj.scene in seen:
+                continue
+            seen.add(traj.scene)
+            out.append((Pair.of(traj.scene, traj.gesture), crop_demo(traj, cfg.max_frames)))
+        return out[: cfg.n_pairs], "dexcanvas_core.example.example_trajectories", []
+
+    candidates = select_pairs(feasible_pairs())
+    quota = {g: cfg.n_pairs // len(GROUPS) + (1 if i < cfg.n_pairs % len(GROUPS) else 0)
+             for i, g in enumerate(GROUPS)}  # fmt: skip
+    out, failed = [], []
+    with progress_bar(console) as prog:
+        task = prog.add_task("generating demonstrations", total=cfg.n_pairs)
+        for p in candidates:
+            g = p.manipulation_type.group
+            if quota[g] == 0:
+                continue
+            try:
+                demo = generate_demo(p, operator=cfg.operator, seed=cfg.seed)
+            except Exception as e:  # a pair the generator cannot script: take the next one
+                failed.append({"pair": str(p), "error": f"{type(e).__name__}: {e}"})
+                continue
+            quota[g] -= 1
+            out.append((p, crop_demo(demo.trajectory, cfg.max_frames)))
+            prog.advance(task)
+            if len(out) == cfg.n_pairs:
+                break
+    return out, "dexcanvas_core.demos.generate_demo", failed
+
+
+# -------------------------------------------------------------------------- re-simulation
+def table_penetration(sim, q: np.ndarray) -> float | None:
+    """Deepest penetration [m] of the hand's collision geoms into the re-simulation's table
+    (z = 0 plane) along the joint trajectory ``q``, kinematically (no simulation). A diagnostic:
+    the retargeting scene has no table, so a hand posed below it is pushed up in simulation."""
+    import mujoco
+
+    from retarget.scene import TABLE_GEOM
+
+    m = sim.model
+    table = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, TABLE_GEOM)
+    if table < 0:
+        return None
+    geoms = [
+        g
+        for g in range(m.ngeom)
+        if g != table
+        and m.geom_bodyid[g] != sim.object_body
+        and (m.geom_contype[g] or m.geom_conaffinity[g])
+    ]
+    d = mujoco.MjData(m)
+    fromto = np.zeros(6)
+    worst = 0.0
+    for qt in q:
+        d.qpos[: sim.hand_nq] = qt
+        mujoco.mj_kinematics(m, d)
+        for g in geoms:
+            worst = max(worst, -mujoco.mj_geomDistance(m, d, g, table, 0.05, fromto))
+    return worst
+
+
+def resim(sim, q, traj) -> dict:
+    """Re-simulate ``q`` with ``sim`` (a ``Resimulator``): its metrics, the kinematic table
+    penetration, and a failed rollout (``success`` False, ``sim_error``) if it diverged."""
+    return resim_result(sim, q, traj)[0]
+
+
+def resim_result(sim, q, traj) -> tuple[dict, object]:
+    """:func:`resim`'s metrics and the ``ValidationResult`` itself (``None`` if it diverged)."""
+    from retarget.errors import RetargetError
+
+    out = {"table_penetration_max_m": table_penetration(sim, q)}
+    try:
+        res = sim.run(q, traj)
+    except RetargetError as e:  # a diverged simulation is a failed rollout
+        return {**out, "success": False, "success_loose": False, "sim_error": str(e)}, None
+    m = res.metrics()
+    # Its penetration is the simulated one; the row's penetration_max_m is the kinematic one.
+    m["sim_penetration_max_m"] = m.pop("penetration_max_m")
+    return {**out, **m}, res
+
+
+# ----------------------------------------------------------------------- terminal, records
+def progress_bar(console):
+    """A rich progress bar: description, bar, done/total, elapsed time."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+    return Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+    )
+
+
+def versions(dists) -> dict:
+    """Installed version of each distribution in ``dists`` (``None`` when absent)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for dist in dists:
+        try:
+            out[dist] = version(dist)
+        except PackageNotFoundError:
+            out[dist] = None
+    return out

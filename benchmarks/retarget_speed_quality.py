@@ -43,21 +43,22 @@ hand and an overall table with the targets, and writes JSON (per-run rows and ag
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
 import time
 import traceback
-from collections import defaultdict
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+from _common import atomic_write_json, load_demonstrations, progress_bar, resim, versions
 
 DEFAULT_OUT = Path(__file__).parent / "results" / "retarget_speed_quality.json"
 OURS, OURS_Q, DEX = "ours", "ours (no squeeze)", "dex-retargeting"
 METHODS = (OURS, OURS_Q, DEX)
+VERSION_DISTS = ("dexcanvas-retarget", "dex-retargeting", "mujoco", "pin", "numpy", "nlopt",
+                 "torch", "qpsolvers", "daqp")  # fmt: skip
 
 # The issue's targets (reported against, not enforced).
 TARGET_MS = 0.5
@@ -91,94 +92,6 @@ class BenchConfig:
         return self
 
 
-# ------------------------------------------------------------------------------ demonstrations
-def select_pairs(pairs) -> list:
-    """The order in which pairs are taken, spreading them over the four groups deterministically.
-
-    Within a group: round robin over its manipulation types (catalogue order); each type walks
-    its objects starting at an offset that differs per type, so types do not all pick the same
-    object. Groups are then interleaved (power, intermediate, precision, in-hand, power, …).
-    Returns every pair in that order; callers take the first ``n`` that work, per group quota.
-    """
-    from dexcanvas_core.taxonomy import GROUPS
-
-    by_group: dict[str, dict[str, list]] = {g: defaultdict(list) for g in GROUPS}
-    for p in pairs:
-        by_group[p.manipulation_type.group][p.manipulation_type.name].append(p)
-    group_orders = {}
-    for g, types in by_group.items():
-        order = []
-        lists = list(types.values())
-        depth = max((len(x) for x in lists), default=0)
-        for r in range(depth):
-            for k, objs in enumerate(lists):
-                if r < len(objs):
-                    order.append(objs[(r + 3 * k) % len(objs)])
-        group_orders[g] = order
-    out = []
-    depth = max((len(o) for o in group_orders.values()), default=0)
-    for r in range(depth):
-        for g in GROUPS:
-            if r < len(group_orders[g]):
-                out.append(group_orders[g][r])
-    return out
-
-
-def _crop(traj, max_frames: int | None):
-    """At most ``max_frames`` frames, starting a third of the window before the object moves."""
-    if max_frames is None or traj.num_frames <= max_frames:
-        return traj
-    start, _ = traj.active_range()
-    s = int(np.clip(start - max_frames // 3, 0, traj.num_frames - max_frames))
-    return traj.slice(s, s + max_frames)
-
-
-def load_demonstrations(cfg: BenchConfig, console) -> tuple[list, str, list[dict]]:
-    """``[(pair, trajectory)]``, the demonstrations' source, and the pairs that failed."""
-    from dexcanvas_core.taxonomy import GROUPS
-
-    try:
-        from dexcanvas_core.demos import feasible_pairs, generate_demo
-    except ImportError as e:
-        console.print(
-            f"[yellow]note:[/yellow] dexcanvas_core.demos has no generate_demo/feasible_pairs "
-            f"yet ({e}); falling back to dexcanvas_core.example (6 pick-and-place pairs, no "
-            "in-hand group)"
-        )
-        from dexcanvas_core.example import example_trajectories
-        from dexcanvas_core.taxonomy import Pair
-
-        seen, out = set(), []
-        for traj in example_trajectories(seed=cfg.seed):
-            if traj.operator != cfg.operator or traj.scene in seen:
-                continue
-            seen.add(traj.scene)
-            out.append((Pair.of(traj.scene, traj.gesture), _crop(traj, cfg.max_frames)))
-        return out[: cfg.n_pairs], "dexcanvas_core.example.example_trajectories", []
-
-    candidates = select_pairs(feasible_pairs())
-    quota = {g: cfg.n_pairs // len(GROUPS) + (1 if i < cfg.n_pairs % len(GROUPS) else 0)
-             for i, g in enumerate(GROUPS)}  # fmt: skip
-    out, failed = [], []
-    with _progress(console) as prog:
-        task = prog.add_task("generating demonstrations", total=cfg.n_pairs)
-        for p in candidates:
-            g = p.manipulation_type.group
-            if quota[g] == 0:
-                continue
-            try:
-                demo = generate_demo(p, operator=cfg.operator, seed=cfg.seed)
-            except Exception as e:  # a pair the generator cannot script: take the next one
-                failed.append({"pair": str(p), "error": f"{type(e).__name__}: {e}"})
-                continue
-            quota[g] -= 1
-            out.append((p, _crop(demo.trajectory, cfg.max_frames)))
-            prog.advance(task)
-            if len(out) == cfg.n_pairs:
-                break
-    return out, "dexcanvas_core.demos.generate_demo", failed
-
-
 # ------------------------------------------------------------------------------------- runs
 def _timed_solves(rt):
     """Wrap ``rt._solve_frame`` to accumulate the time spent in it; returns the accumulator.
@@ -197,49 +110,6 @@ def _timed_solves(rt):
 
     rt._solve_frame = timed
     return acc
-
-
-def table_penetration(sim, q: np.ndarray) -> float | None:
-    """Deepest penetration [m] of the hand's collision geoms into the re-simulation's table
-    (z = 0 plane) along the joint trajectory ``q``, kinematically (no simulation). A diagnostic:
-    the retargeting scene has no table, so a hand posed below it is pushed up in simulation."""
-    import mujoco
-
-    from retarget.scene import TABLE_GEOM
-
-    m = sim.model
-    table = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, TABLE_GEOM)
-    if table < 0:
-        return None
-    geoms = [
-        g
-        for g in range(m.ngeom)
-        if g != table
-        and m.geom_bodyid[g] != sim.object_body
-        and (m.geom_contype[g] or m.geom_conaffinity[g])
-    ]
-    d = mujoco.MjData(m)
-    fromto = np.zeros(6)
-    worst = 0.0
-    for qt in q:
-        d.qpos[: sim.hand_nq] = qt
-        mujoco.mj_kinematics(m, d)
-        for g in geoms:
-            worst = max(worst, -mujoco.mj_geomDistance(m, d, g, table, 0.05, fromto))
-    return worst
-
-
-def _resim(sim, q, traj) -> dict:
-    from retarget.errors import RetargetError
-
-    out = {"table_penetration_max_m": table_penetration(sim, q)}
-    try:
-        m = sim.run(q, traj).metrics()
-    except RetargetError as e:  # a diverged simulation is a failed rollout
-        return {**out, "success": False, "success_loose": False, "sim_error": str(e)}
-    # Its penetration is the simulated one; the row's penetration_max_m is the kinematic one.
-    m["sim_penetration_max_m"] = m.pop("penetration_max_m")
-    return {**out, **m}
 
 
 def run_one(hand, pair, traj, baseline) -> list[dict]:
@@ -270,12 +140,12 @@ def run_one(hand, pair, traj, baseline) -> list[dict]:
     ms_solve = 1e3 * solve["s"] / traj.num_frames
     rows = [
         {**base, "method": OURS, "ms_per_frame": ms_solve, "solve_time_s": solve["s"],
-         "ms_per_frame_total": robot.ms_per_frame, **ours_km, **_resim(sim, robot.q_command, traj)},
+         "ms_per_frame_total": robot.ms_per_frame, **ours_km, **resim(sim, robot.q_command, traj)},
         {**base, "method": OURS_Q, "ms_per_frame": ms_solve, "solve_time_s": solve["s"],
-         "ms_per_frame_total": robot.ms_per_frame, **ours_km, **_resim(sim, robot.q, traj)},
+         "ms_per_frame_total": robot.ms_per_frame, **ours_km, **resim(sim, robot.q, traj)},
         {**base, "method": DEX, "ms_per_frame": dex.ms_per_frame, "solve_time_s": dex.solve_time_s,
          "ms_per_frame_total": dex.ms_per_frame, "solver_failures": dex.solver_failures,
-         **dex_km, **_resim(sim, dex.q, traj)},
+         **dex_km, **resim(sim, dex.q, traj)},
     ]  # fmt: skip
     return rows
 
@@ -367,18 +237,6 @@ def target_checks(overall: dict) -> list[dict]:
 
 
 # ----------------------------------------------------------------------------------- output
-def _progress(console):
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
-
-    return Progress(
-        "[progress.description]{task.description}",
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-    )
-
-
 def _mm(x) -> str:
     return "–" if x is None else f"{1e3 * x:.2f}"
 
@@ -440,34 +298,6 @@ def targets_table(checks: list[dict]):
     return t
 
 
-def _versions() -> dict:
-    from importlib.metadata import PackageNotFoundError, version
-
-    out = {}
-    for dist in ("dexcanvas-retarget", "dex-retargeting", "mujoco", "pin", "numpy", "nlopt",
-                 "torch", "qpsolvers", "daqp"):  # fmt: skip
-        try:
-            out[dist] = version(dist)
-        except PackageNotFoundError:
-            out[dist] = None
-    return out
-
-
-def _atomic_write_json(path: Path, obj) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(obj, indent=2, default=_json_default))
-    os.replace(tmp, path)
-
-
-def _json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
-
-
 # ------------------------------------------------------------------------------------- main
 def run_benchmark(cfg: BenchConfig, console=None) -> dict:
     """Run every hand × pair, print the tables, write the JSON; return the JSON document."""
@@ -504,7 +334,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
                 continue
             jobs.append((hand, pair, traj))
     baselines: dict[str, object] = {}
-    with _progress(console) as prog:
+    with progress_bar(console) as prog:
         task = prog.add_task("retargeting + re-simulating", total=len(jobs))
         for hand, pair, traj in jobs:
             prog.update(task, description=f"{hand.name} · {pair}")
@@ -555,7 +385,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
             "loadavg_start": load0,
             "loadavg_end": os.getloadavg(),
         },
-        "versions": _versions(),
+        "versions": versions(VERSION_DISTS),
         "definitions": {
             "ms_per_frame": "per-frame solve time only (ours: Retargeter._solve_frame; "
             "dex-retargeting: SeqRetargeting.retarget), total / frames",
@@ -578,7 +408,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         "runs": rows,
         "wall_time_s": time.perf_counter() - t_start,
     }
-    _atomic_write_json(cfg.out, doc)
+    atomic_write_json(cfg.out, doc)
     console.print(f"wrote {cfg.out} ({doc['wall_time_s']:.0f} s)")
     return doc
 

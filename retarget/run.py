@@ -140,15 +140,19 @@ def force_metrics(robot, sim, human, retargeter) -> dict:
     (shortfall below 10 % of it or 0.05 N)."""
     from dexcanvas_core.trajectory import FORCE_GROUPS
 
-    H = np.linalg.norm(robot.human_force, axis=2)  # (T, F)
-    R = np.linalg.norm(sim.finger_force_world[:, : H.shape[1]], axis=2)
+    H = np.linalg.norm(robot.human_force, axis=2)  # (T, F) per human finger the robot maps
+    # the robot finger each human finger drives (a gripper merges index and middle)
+    col = [sim.fingers.index(retargeter.hand.fingers[f]) for f in retargeter.tip_human]
+    R = np.linalg.norm(sim.finger_force_world[:, col], axis=2)
     per = {}
     for i, f in enumerate(retargeter.tip_human):
         h, r = H[:, i], R[:, i]
         on = (h > 0.05) | (r > 0.05)
-        corr = float(np.corrcoef(h[on], r[on])[0, 1]) if on.sum() > 2 and h[on].std() > 0 and (
-            r[on].std() > 0) else None  # fmt: skip
-        rel = float(np.abs(r[on] - h[on]).sum() / max(h[on].sum(), 1e-9)) if on.any() else None
+        corr = None
+        if on.sum() > 2 and h[on].std() > 0 and r[on].std() > 0:
+            corr = float(np.corrcoef(h[on], r[on])[0, 1])
+        held = h > 0.05  # relative error only where the human finger carries force
+        rel = float(np.abs(r[held] - h[held]).sum() / h[held].sum()) if held.sum() > 2 else None
         per[f] = {"correlation": corr, "relative_magnitude_error": rel}
     human_total = human.contacts.finger_totals()[:, : len(FORCE_GROUPS)].sum(axis=1)
     robot_total = sim.finger_force_world.sum(axis=1)

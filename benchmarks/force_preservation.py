@@ -1,0 +1,1015 @@
+"""Force preservation: do retargeted robot hands move the object like the human, pressing alike?
+
+Demonstrations: ``--n-pairs`` (default 20) generated pairs of the built-in demonstrations, spread
+evenly over the four groups (power, intermediate, precision, in-hand) exactly as
+``benchmarks/retarget_speed_quality.py`` picks them (``_common.load_demonstrations``), cropped to
+``--max-frames`` if given. Light and heavy: a pair whose object has a weighted ``H`` variant in
+the catalogue (``taxonomy.heavy_variant``: cube2 → cube2h) is also run as a heavy version of the
+same demonstration: the human is simulated with ``SimConfig(object_id=<heavy id>)`` and every
+robot variant retargeted and re-simulated with the heavy object's geometry (same shape, its
+mass). ``--no-heavy`` leaves them out.
+
+Human forces: every (pair, object) goes once through the force pipeline
+(``dexcanvas_core.sim.pipeline.simulate``; sampling MPC, or ``--human-tracker open_loop`` for
+speed). Where it does not reproduce the demonstration (DexCanvas rule) there are no human forces
+to match: variant (d) is skipped for it (counted and listed) and the force columns of the other
+variants stay empty.
+
+Per hand (``--hands``, default every registered hand; a hand skips pairs it cannot perform,
+``retarget.run.check_pair``) and per (pair, object), five variants side by side:
+
+* **(a) dex-retargeting** — its position retargeting (``retarget.baselines``, free wrist unless
+  ``--dex-wrist fixed``) on the same scaled keypoint targets, re-simulated on its ``q``;
+* **(b) keypoints** — ``Retargeter`` with ``use_contacts=False, squeeze_depth=0``;
+* **(c) + contacts** — default ``RetargetConfig`` (contact preservation, the 10 mm grip squeeze),
+  re-simulated on ``q_command``; contacts inferred from the demonstration's geometry, as the
+  kinematic product does without the force pipeline;
+* **(d) + forces** — ``force_matching=True`` on the force-annotated demonstration (contacts from
+  its records, the human's per-finger forces → force-distribution QP → ``K⁻¹Jᵀf`` offsets),
+  re-simulated on ``q_command`` with stiff contacts (``retarget.run.FORCE_CONTACT_TIMECONST``);
+  (a)–(c) use the re-simulation's default contacts;
+* **(e) + refinement** — (d), and where (d)'s replay fails, ``retarget.refine.refine``: the
+  force pipeline's sampling MPC on the robot hand (stiff contacts, as (d)), starting from (d)'s
+  commands; success and object errors are the refined rollout's (no force columns: the
+  refinement reports no per-finger forces), plus how far the commands moved.
+
+Measured per run (``Resimulator``: the hand's own position servos, object free on a table):
+
+* strict success (no frame with object position error > 5 cm) and mean-error success (mean
+  < 10 cm and < 0.5 rad); mean object position [cm] and rotation [°] errors;
+* force correlation — ``retarget.run.force_metrics``: per corresponding finger, the correlation
+  of the human's and the re-simulated robot's contact-force magnitude profiles, averaged over
+  fingers (runs with human forces only; the human side is (d)'s ``human_force``);
+* object force error — mean over frames where the human touches of ‖Σ robot contact forces −
+  Σ human contact forces‖ [N] (the force part of the hand's wrench on the object; the
+  re-simulation reports no contact points, so no torque), also as % of the object's weight m·g;
+* contact precision / recall, and for (d) the share of frames whose required force the force QP
+  could produce (``wrench_feasible_fraction``);
+* penetration — deepest kinematic hand–object penetration of the solution ``q`` [mm] and the
+  deepest one seen in the re-simulation;
+* ms/frame — the per-frame retargeting loop (ours: QP solve + squeeze or force QP; dex-
+  retargeting: its per-frame call), divided by the frame count. The force pipeline's time is
+  reported per simulation, apart.
+
+Aggregates (errors count as failures; skipped (d) runs are not runs): per hand and over the
+five-finger hands (five distinct robot fingers), per variant; heavy vs light per variant (all
+runs, and the same (hand, pair) with both objects). The "target met?" table checks the issue's
+targets on the five-finger hands (on every hand run when none was): (d) strict success ≥ 85 %
+and ≥ 2× (a)'s on the same runs; mean force correlation ≥ 0.8 and object force error ≤ 15 % of
+the weight on (d)'s successful runs; heavy variants succeed as often as their light ones.
+
+Writes JSON (default ``benchmarks/results/force_preservation.json``, atomically) and a PNG of
+strict success by variant and hand (grouped bars, next to the JSON unless ``--plot``). Work runs
+on ``--workers`` spawned processes, one thread each::
+
+    python benchmarks/force_preservation.py                      # 20 pairs, every hand, MPC
+    python benchmarks/force_preservation.py --hands allegro --n-pairs 2 \\
+        --human-tracker open_loop --workers 1 --out /tmp/fp7.json   # smoke run
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import logging
+import multiprocessing
+import os
+import platform
+import sys
+import time
+import traceback
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+from _common import (
+    atomic_write_json,
+    load_demonstrations,
+    progress_bar,
+    resim_result,
+    versions,
+)
+from force_pipeline import _init_worker, _one_thread_env
+
+DEFAULT_OUT = Path(__file__).parent / "results" / "force_preservation.json"
+TRACKERS = ("mpc", "open_loop")
+VERSION_DISTS = (
+    "dexcanvas-retarget",
+    "dex-retargeting",
+    "mujoco",
+    "pin",
+    "numpy",
+    "qpsolvers",
+    "daqp",
+    "matplotlib",
+)
+
+VARIANTS = ("a", "b", "c", "d", "e")
+LABELS = {
+    "a": "(a) dex-retargeting",
+    "b": "(b) ours: keypoints",
+    "c": "(c) + contacts",
+    "d": "(d) + forces",
+    "e": "(e) + refinement",
+}
+NOT_IMPLEMENTED: dict[str, str] = {}
+"""Variants the library cannot run yet: a row in every table, no numbers."""
+RUN_VARIANTS = tuple(v for v in VARIANTS if v not in NOT_IMPLEMENTED)
+HUMAN_METRICS = ("success", "success_loose", "failed_at_frame", "frames", "frames_tracked",
+                 "object_pos_err_max_m", "object_pos_err_mean_m", "mass_kg", "compute_s",
+                 "compute_s_per_demo_s", "hold_weight_ratio", "contact_frames")  # fmt: skip
+"""Force-pipeline metrics kept per human simulation (``SimResult.metrics``)."""
+FIVE_FINGER = "five-finger hands"
+ALL_HANDS = "all hands"
+
+# The issue's targets (reported against, not enforced).
+TARGET_SUCCESS = 0.85
+TARGET_RATIO = 2.0
+TARGET_CORRELATION = 0.8
+TARGET_FORCE_PCT_WEIGHT = 0.15
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """One benchmark run."""
+
+    hands: tuple[str, ...] | None = None
+    """Hands to run; ``None``: every registered hand."""
+    n_pairs: int = 20
+    """Demonstration pairs (light objects as generated), spread over the four groups."""
+    max_frames: int | None = None
+    """Crop each demonstration to this many frames (around the start of the object motion)."""
+    human_tracker: str = "mpc"
+    """Force pipeline tracker: ``mpc`` (sampling MPC) or ``open_loop`` (fast, less successful)."""
+    heavy: bool = True
+    """Also run pairs whose object has a heavy variant with that variant."""
+    workers: int = 2
+    """Worker processes (one thread each)."""
+    out: Path = DEFAULT_OUT
+    """JSON output."""
+    plot: Path | None = None
+    """PNG of strict success by variant and hand; ``None``: the JSON path with ``.png``."""
+    operator: str = "operator1"
+    seed: int = 0
+    dex_wrist: str = "free"
+    """dex-retargeting's wrist: ``free`` (optimised) or ``fixed`` (the human wrist pose)."""
+
+    def validate(self) -> BenchConfig:
+        from retarget.hands import available_hands
+
+        if self.n_pairs < 1:
+            raise SystemExit(f"--n-pairs must be >= 1, got {self.n_pairs}")
+        if self.max_frames is not None and self.max_frames < 2:
+            raise SystemExit(f"--max-frames must be >= 2, got {self.max_frames}")
+        if self.human_tracker not in TRACKERS:
+            raise SystemExit(
+                f"unknown --human-tracker {self.human_tracker!r}; available: {', '.join(TRACKERS)}"
+            )
+        if self.workers < 1:
+            raise SystemExit(f"--workers must be >= 1, got {self.workers}")
+        if self.dex_wrist not in ("free", "fixed"):
+            raise SystemExit(f"--dex-wrist must be free or fixed, got {self.dex_wrist!r}")
+        bad = [h for h in self.hands or () if h not in available_hands()]
+        if bad:
+            raise SystemExit(
+                f"unknown hand(s) {', '.join(bad)}; available: {', '.join(available_hands())}"
+            )
+        return self
+
+    def plot_path(self) -> Path:
+        return Path(self.plot) if self.plot is not None else Path(self.out).with_suffix(".png")
+
+
+def is_five_finger(hand) -> bool:
+    """Five distinct robot fingers (Shadow, SVH, Ability, Inspire)."""
+    return len(set(hand.robot_fingers)) == 5
+
+
+def object_plan(pair, heavy: bool) -> list[dict]:
+    """The objects a pair is run with: the demonstration's own, then its heavy variant."""
+    from dexcanvas_core.taxonomy import heavy_variant
+
+    spec = pair.object
+    out = [
+        {
+            "object_id": spec.id,
+            "object_variant": "heavy" if spec.heavy else "light",
+            "heavy_version_of": None,
+        }
+    ]
+    h = heavy_variant(spec.id) if heavy and not spec.heavy else None
+    if h is not None:
+        out.append({"object_id": h.id, "object_variant": "heavy", "heavy_version_of": spec.id})
+    return out
+
+
+# ------------------------------------------------------------------------------------ workers
+def _error(e: BaseException) -> dict:
+    return {"error": f"{type(e).__name__}: {e}", "traceback": traceback.format_exc(limit=4)}
+
+
+def _human_sim(args) -> dict:
+    """Worker: the force pipeline on one (pair, object). Returns ``{"record", "trajectory"}``;
+    ``trajectory`` (the demonstration annotated with contacts and forces) only on success."""
+    from dexcanvas_core.sim.pipeline import SimConfig, simulate
+
+    key, traj, object_id, tracker = args
+    rec: dict = {"object_id": object_id, "tracker": tracker}
+    w0 = time.perf_counter()
+    try:
+        res = simulate(traj, SimConfig(tracker=tracker, object_id=object_id))
+        rec.update({k: res.metrics[k] for k in HUMAN_METRICS})
+        annotated = res.trajectory if res.success else None
+    except Exception as e:  # no human forces for this (pair, object): recorded, counted
+        rec.update(_error(e))
+        rec["success"] = False
+        annotated = None
+    rec["wall_s"] = time.perf_counter() - w0
+    return {"key": key, "record": rec, "trajectory": annotated}
+
+
+@cache
+def _baseline(hand_name: str, wrist: str):
+    """dex-retargeting for one hand, built once per worker process."""
+    from retarget.baselines import DexRetargetingBaseline, DexRetargetingConfig
+    from retarget.hands import get_hand
+
+    return DexRetargetingBaseline(get_hand(hand_name), DexRetargetingConfig(wrist=wrist))
+
+
+def _force_columns(robot_d, sim_res, human, retargeter, variant: str) -> dict:
+    """``force_metrics`` of one variant's re-simulation against the human's forces: every
+    variant is compared with the human per-finger forces (d)'s retargeter mapped onto this
+    hand's fingers (``robot_d.human_force``)."""
+    from retarget.run import force_metrics
+
+    robot = robot_d
+    if variant != "d":  # only the human side and the QP's shortfall are read from the robot
+        robot = SimpleNamespace(
+            human_force=robot_d.human_force, wrench_shortfall=robot_d.wrench_shortfall
+        )
+    m = force_metrics(robot, sim_res, human, retargeter)
+    if variant != "d":
+        m["wrench_feasible_fraction"] = None  # a property of the force QP, (d) only
+    return m
+
+
+def _hand_job(args) -> list[dict]:
+    """Worker: variants (a)–(d) of one hand on one (pair, object); one row per variant."""
+    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.sim.pipeline import GRAVITY
+    from retarget.baselines import KinematicMetrics, measure_trajectory
+    from retarget.hands import get_hand
+    from retarget.retargeter import RetargetConfig, Retargeter
+    from retarget.run import FORCE_CONTACT_TIMECONST
+    from retarget.validate import Resimulator, ValidateConfig
+
+    base, traj, human, dex_wrist = args
+    rows = {v: {**base, "variant": v} for v in RUN_VARIANTS}
+    sims: dict[str, object] = {}
+    retargeters: dict[str, object] = {}
+    robot_d = None
+    try:
+        hand = get_hand(base["hand"])
+        geom = object_geometry(base["object_id"])
+        weight_n = geom.mass_kg * GRAVITY
+        for r in rows.values():
+            r.update(mass_kg=geom.mass_kg, weight_n=weight_n)
+        resim_soft = Resimulator(hand, geom)
+        configs = {
+            "b": RetargetConfig(use_contacts=False, squeeze_depth=0.0),
+            "c": RetargetConfig(),
+            "d": RetargetConfig(force_matching=True),
+        }
+        for v in ("b", "c", "d"):
+            row = rows[v]
+            if v == "d" and human is None:
+                row["skipped"] = "the force pipeline did not reproduce the demonstration"
+                continue
+            t0 = time.perf_counter()
+            try:
+                rt = Retargeter(hand, geom, configs[v])
+                src = human if v == "d" else traj
+                robot = rt.retarget(src)
+                sim = (
+                    Resimulator(
+                        hand, geom, ValidateConfig(contact_timeconst=FORCE_CONTACT_TIMECONST)
+                    )
+                    if v == "d"
+                    else resim_soft
+                )
+                m, sims[v] = resim_result(sim, robot.q_command, src)
+                retargeters[v] = rt
+                if v == "d":
+                    robot_d = robot
+                row.update(
+                    ms_per_frame=robot.ms_per_frame, **KinematicMetrics.of(robot).summary(), **m
+                )
+            except Exception as e:  # one variant's failure is its own row's
+                row.update(_error(e))
+            row["wall_s"] = time.perf_counter() - t0
+        # (a) on (b)'s targets, measured with (b)'s retargeter (same hand, same definitions)
+        row = rows["a"]
+        t0 = time.perf_counter()
+        try:
+            rt_b = retargeters.get("b") or Retargeter(hand, geom, configs["b"])
+            tg = rt_b.human_targets(traj)
+            baseline = _baseline(hand.name, dex_wrist)
+            if rt_b.kp_sites != baseline.keypoint_sites:
+                raise RuntimeError(f"{hand.name}: baseline keypoint sites differ from ours")
+            dex = baseline.retarget_targets(tg["keypoints"], tg["wrist_p"], tg["wrist_R"])
+            m, sims["a"] = resim_result(resim_soft, dex.q, traj)
+            row.update(
+                ms_per_frame=dex.ms_per_frame,
+                solver_failures=dex.solver_failures,
+                **measure_trajectory(rt_b, traj, dex.q, tg).summary(),
+                **m,
+            )
+        except Exception as e:
+            row.update(_error(e))
+        row["wall_s"] = time.perf_counter() - t0
+        # (e) (d) + physics refinement where (d)'s replay fails
+        row = rows["e"]
+        if "skipped" in rows["d"] or "error" in rows["d"] or robot_d is None:
+            row["skipped"] = rows["d"].get("skipped") or "variant (d) failed"
+        elif rows["d"]["success"]:
+            keep = ("success", "success_loose", "object_pos_err_max_m", "object_pos_err_mean_m",
+                    "object_rot_err_mean_rad", "ms_per_frame", "keypoint_err_mean_m",
+                    "penetration_max_m")  # fmt: skip
+            row.update({k: rows["d"][k] for k in keep if k in rows["d"]})
+            row.update(refined=False, finger_ctrl_deviation_mean_rad=0.0,
+                       wrist_pos_deviation_mean_m=0.0)  # fmt: skip
+        else:
+            from retarget.refine import RefineConfig, refine
+
+            t0 = time.perf_counter()
+            try:
+                rf = refine(hand, geom, human, robot_d, retargeters["d"].tip_sites,
+                            RefineConfig(contact_timeconst=FORCE_CONTACT_TIMECONST))  # fmt: skip
+                rm = rf.metrics()
+                row.update(
+                    success=rm["success"],
+                    success_loose=bool(
+                        rm["frames_tracked"] == human.num_frames
+                        and rm["object_pos_err_mean_m"] < 0.10
+                        and rm["object_rot_err_mean_rad"] < 0.5
+                    ),
+                    object_pos_err_max_m=rm["object_pos_err_max_m"],
+                    object_pos_err_mean_m=rm["object_pos_err_mean_m"],
+                    object_rot_err_mean_rad=rm["object_rot_err_mean_rad"],
+                    ms_per_frame=rows["d"]["ms_per_frame"],
+                    keypoint_err_mean_m=rows["d"].get("keypoint_err_mean_m"),
+                    penetration_max_m=rows["d"].get("penetration_max_m"),
+                    refined=True,
+                    refine_s=rm["compute_s"],
+                    finger_ctrl_deviation_mean_rad=rm["finger_ctrl_deviation_mean_rad"],
+                    wrist_pos_deviation_mean_m=rm["wrist_pos_deviation_mean_m"],
+                )
+            except Exception as e:
+                row.update(_error(e))
+            row["wall_s"] = time.perf_counter() - t0
+        # force columns: every re-simulated variant against the human's forces
+        if robot_d is not None:
+            for v, sim_res in sims.items():
+                if sim_res is None or "error" in rows[v]:
+                    continue
+                try:
+                    fm = _force_columns(robot_d, sim_res, human, retargeters["d"], v)
+                    err = fm["object_force_error_mean_n"]
+                    fm["object_force_error_pct_weight"] = None if err is None else err / weight_n
+                    rows[v].update(fm)
+                except Exception as e:
+                    rows[v]["force_metrics_error"] = f"{type(e).__name__}: {e}"
+    except Exception as e:  # the hand or the scene could not be built: every variant fails
+        for r in rows.values():
+            if "error" not in r and "skipped" not in r:
+                r.update(_error(e))
+    return [rows[v] for v in RUN_VARIANTS]
+
+
+# --------------------------------------------------------------------------------- aggregates
+def _mean(rows: list[dict], key: str) -> float | None:
+    v = [r[key] for r in rows if r.get(key) is not None]
+    return float(np.mean(v)) if v else None
+
+
+def _rate(rows: list[dict], key: str = "success") -> float | None:
+    return float(np.mean([bool(r.get(key)) for r in rows])) if rows else None
+
+
+def aggregate(rows: list[dict]) -> dict:
+    """One variant's numbers over ``rows`` (module docstring): skipped rows are not runs, errors
+    count as failures and are left out of the other columns."""
+    runs = [r for r in rows if "skipped" not in r]
+    ok = [r for r in runs if "error" not in r]
+    won = [r for r in ok if r.get("success")]
+    with_forces = [r for r in runs if r.get("human_forces")]
+    timed = [r for r in ok if r.get("ms_per_frame") is not None]
+    frames = sum(r["frames"] for r in timed)
+    pens = [r["penetration_max_m"] for r in ok if r.get("penetration_max_m") is not None]
+    return {
+        "runs": len(runs),
+        "errors": len(runs) - len(ok),
+        "skipped": len(rows) - len(runs),
+        "success_rate": _rate(runs),
+        "success_loose_rate": _rate(runs, "success_loose"),
+        "runs_with_human_forces": len(with_forces),
+        "success_rate_with_human_forces": _rate(with_forces),
+        "object_pos_err_mean_m": _mean(ok, "object_pos_err_mean_m"),
+        "object_rot_err_mean_rad": _mean(ok, "object_rot_err_mean_rad"),
+        "force_correlation_mean": _mean(ok, "force_correlation_mean"),
+        "force_correlation_mean_successful": _mean(won, "force_correlation_mean"),
+        "object_force_error_mean_n": _mean(ok, "object_force_error_mean_n"),
+        "object_force_error_pct_weight": _mean(ok, "object_force_error_pct_weight"),
+        "object_force_error_mean_n_successful": _mean(won, "object_force_error_mean_n"),
+        "object_force_error_pct_weight_successful": _mean(won, "object_force_error_pct_weight"),
+        "runs_with_force_metrics": sum(
+            1
+            for r in ok
+            if r.get("force_correlation_mean") is not None
+            or r.get("object_force_error_mean_n") is not None
+        ),
+        "contact_precision": _mean(ok, "contact_precision"),
+        "contact_recall": _mean(ok, "contact_recall"),
+        "wrench_feasible_fraction": _mean(ok, "wrench_feasible_fraction"),
+        "penetration_max_m": max(pens) if pens else None,
+        "penetration_mean_of_max_m": float(np.mean(pens)) if pens else None,
+        "sim_penetration_max_m": max(
+            (r["sim_penetration_max_m"] for r in ok if r.get("sim_penetration_max_m") is not None),
+            default=None,
+        ),
+        "ms_per_frame": (
+            sum(r["ms_per_frame"] * r["frames"] for r in timed) / frames if frames else None
+        ),
+    }
+
+
+def aggregate_variants(rows: list[dict]) -> dict:
+    """``{variant: aggregate}``; not-implemented variants carry their note instead."""
+    out = {v: aggregate([r for r in rows if r["variant"] == v]) for v in RUN_VARIANTS}
+    out.update({v: {"implemented": False, "note": note} for v, note in NOT_IMPLEMENTED.items()})
+    return {v: out[v] for v in VARIANTS}
+
+
+def heavy_vs_light(rows: list[dict]) -> dict:
+    """Per variant: strict success of light-object and heavy-object runs, over all runs and over
+    the (hand, pair)s run with both a light object and its heavy variant (``paired``)."""
+    out = {}
+    for v in RUN_VARIANTS:
+        rs = [r for r in rows if r["variant"] == v and "skipped" not in r]
+        light = [r for r in rs if r["object_variant"] == "light"]
+        heavy = [r for r in rs if r["object_variant"] == "heavy"]
+        light_by = {(r["hand"], r["pair"]): r for r in light}
+        pl, ph = [], []
+        for h in heavy:
+            li = light_by.get((h["hand"], h["pair"]))
+            if h["heavy_version_of"] is not None and li is not None:
+                pl.append(li)
+                ph.append(h)
+        out[v] = {
+            "light_runs": len(light),
+            "light_success_rate": _rate(light),
+            "heavy_runs": len(heavy),
+            "heavy_success_rate": _rate(heavy),
+            "paired_runs": len(ph),
+            "paired_light_success_rate": _rate(pl),
+            "paired_heavy_success_rate": _rate(ph),
+        }
+    return out
+
+
+def target_checks(scope: str, rows: list[dict], agg: dict, hv: dict) -> list[dict]:
+    """The issue's targets on one scope's rows (``met`` is ``None`` when not measured)."""
+    d = agg["d"]
+    force_keys = {
+        (r["hand"], r["pair"], r["object_id"])
+        for r in rows
+        if r["variant"] == "d" and "skipped" not in r
+    }
+    same = {
+        v: [
+            r
+            for r in rows
+            if r["variant"] == v and (r["hand"], r["pair"], r["object_id"]) in force_keys
+        ]
+        for v in ("a", "d")
+    }
+    sa, sd = _rate(same["a"]), _rate(same["d"])
+    corr = d["force_correlation_mean_successful"]
+    ferr = d["object_force_error_pct_weight_successful"]
+    pl, ph = hv["d"]["paired_light_success_rate"], hv["d"]["paired_heavy_success_rate"]
+
+    def at_least(v, t):
+        return None if v is None else bool(v >= t)
+
+    ratio_met = None
+    if sa is not None and sd is not None:
+        ratio_met = bool(sd >= TARGET_RATIO * sa and sd > 0)
+    return [
+        {
+            "scope": scope,
+            "name": "success",
+            "target": f"(d) strict success ≥ {100 * TARGET_SUCCESS:.0f} %",
+            "value": d["success_rate"],
+            "runs": d["runs"],
+            "met": at_least(d["success_rate"], TARGET_SUCCESS),
+        },
+        {
+            "scope": scope,
+            "name": "vs dex",
+            "target": f"(d) strict success ≥ {TARGET_RATIO:g}× (a)'s (same runs)",
+            "value": [sd, sa],
+            "runs": len(same["d"]),
+            "met": ratio_met,
+        },
+        {
+            "scope": scope,
+            "name": "correlation",
+            "target": f"force correlation ≥ {TARGET_CORRELATION:g} (successful (d) runs)",
+            "value": corr,
+            "met": at_least(corr, TARGET_CORRELATION),
+        },
+        {
+            "scope": scope,
+            "name": "force error",
+            "target": f"object force error ≤ {100 * TARGET_FORCE_PCT_WEIGHT:.0f} % of weight "
+            "(successful (d) runs)",
+            "value": ferr,
+            "met": None if ferr is None else bool(ferr <= TARGET_FORCE_PCT_WEIGHT),
+        },
+        {
+            "scope": scope,
+            "name": "heavy",
+            "target": "heavy variants succeed as often as light ones ((d), same hand and pair)",
+            "value": [ph, pl],
+            "runs": hv["d"]["paired_runs"],
+            "met": None if pl is None or ph is None else bool(ph >= pl),
+        },
+    ]
+
+
+# ------------------------------------------------------------------------------------- output
+def _f(x, scale: float = 1.0, fmt: str = ".1f") -> str:
+    return "–" if x is None else format(scale * x, fmt)
+
+
+def _coloured(text: str, met: bool | None) -> str:
+    if met is None:
+        return text
+    return f"[green]{text}[/green]" if met else f"[red]{text}[/red]"
+
+
+def variants_table(title: str, agg: dict):
+    from rich.table import Table
+
+    t = Table(
+        title=title,
+        caption="strict: no frame > 5 cm; loose: mean < 10 cm and < 0.5 rad (errors count as "
+        "failures; (d) runs only where the force pipeline reproduced the demonstration). obj, "
+        "rot: mean object errors. F corr (force correlation), F err (object force error, N and "
+        "% of m·g): runs with human forces, all / successful. pen: kinematic / re-simulation "
+        "max. (a)–(c) re-simulated with default contacts, (d) with stiff contacts.",
+    )
+    cols = ("variant", "runs", "strict %", "loose %", "obj cm", "rot °", "F corr", "F err N",
+            "F err %mg", "pen mm", "ms/frame")  # fmt: skip
+    for c in cols:
+        t.add_column(c, justify="left" if c == "variant" else "right", no_wrap=True)
+    for v in VARIANTS:
+        a = agg[v]
+        if v in NOT_IMPLEMENTED:
+            t.add_row(LABELS[v], NOT_IMPLEMENTED[v], *["n/a"] * (len(cols) - 2))
+            continue
+        runs = f"{a['runs']}"
+        if a["errors"]:
+            runs += f" ({a['errors']} err)"
+        if a["skipped"]:
+            runs += f" ({a['skipped']} skip)"
+        t.add_row(
+            LABELS[v],
+            runs,
+            _f(a["success_rate"], 100, ".0f"),
+            _f(a["success_loose_rate"], 100, ".0f"),
+            _f(a["object_pos_err_mean_m"], 100, ".2f"),
+            _f(a["object_rot_err_mean_rad"], 180 / np.pi),
+            f"{_f(a['force_correlation_mean'], fmt='.2f')} / "
+            f"{_f(a['force_correlation_mean_successful'], fmt='.2f')}",
+            f"{_f(a['object_force_error_mean_n'], fmt='.2f')} / "
+            f"{_f(a['object_force_error_mean_n_successful'], fmt='.2f')}",
+            f"{_f(a['object_force_error_pct_weight'], 100, '.0f')} / "
+            f"{_f(a['object_force_error_pct_weight_successful'], 100, '.0f')}",
+            f"{_f(a['penetration_max_m'], 1e3)} / {_f(a['sim_penetration_max_m'], 1e3)}",
+            _f(a["ms_per_frame"], fmt=".2f"),
+        )
+    return t
+
+
+def human_table(sims: list[dict]):
+    from rich.table import Table
+
+    ok = sum(1 for s in sims if s["success"])
+    tracker = sims[0]["tracker"] if sims else "–"
+    t = Table(
+        title=f"human force pipeline ({tracker}): {ok}/{len(sims)} reproduced the demonstration",
+        caption="the others have no human forces: (d) is skipped for them and the other "
+        "variants' force columns stay empty",
+    )
+    for c in ("pair", "object", "mass kg", "reproduced", "max err cm", "CPU s"):
+        t.add_column(c, justify="left" if c in ("pair", "object") else "right", no_wrap=True)
+    for s in sims:
+        if "error" in s:
+            status = f"[red]error: {s['error'][:60]}[/red]"
+        elif s["success"]:
+            status = "[green]yes[/green]"
+        else:
+            status = f"[red]no (frame {s['failed_at_frame']})[/red]"
+        t.add_row(
+            s["pair"],
+            s["object_id"],
+            _f(s.get("mass_kg"), fmt=".3f"),
+            status,
+            _f(s.get("object_pos_err_max_m"), 100),
+            _f(s.get("compute_s")),
+        )
+    return t
+
+
+def heavy_table(hv_by_scope: dict):
+    from rich.table import Table
+
+    t = Table(
+        title="heavy vs light: strict success %",
+        caption="all: every light / heavy run; paired: the same (hand, pair) with the light "
+        "object and its heavy variant (n pairs)",
+    )
+    for c in ("scope", "variant", "light %", "heavy %", "paired light %", "paired heavy %", "n"):
+        t.add_column(c, justify="left" if c in ("scope", "variant") else "right", no_wrap=True)
+    for scope, hv in hv_by_scope.items():
+        for v in VARIANTS:
+            if v in NOT_IMPLEMENTED:
+                t.add_row(scope, LABELS[v], NOT_IMPLEMENTED[v], *["n/a"] * 4)
+                continue
+            h = hv[v]
+            t.add_row(
+                scope,
+                LABELS[v],
+                f"{_f(h['light_success_rate'], 100, '.0f')} ({h['light_runs']})",
+                f"{_f(h['heavy_success_rate'], 100, '.0f')} ({h['heavy_runs']})",
+                _f(h["paired_light_success_rate"], 100, ".0f"),
+                _f(h["paired_heavy_success_rate"], 100, ".0f"),
+                str(h["paired_runs"]),
+            )
+    return t
+
+
+def targets_table(scope: str, checks: list[dict]):
+    from rich.table import Table
+
+    t = Table(title=f"targets (issue 7) on {scope}")
+    t.add_column("target")
+    t.add_column("measured", justify="right")
+    t.add_column("target met?", justify="center")
+    for c in checks:
+        v = c["value"]
+        if c["name"] in ("vs dex", "heavy"):
+            a, b = v
+            s = f"{_f(a, 100, '.0f')} % vs {_f(b, 100, '.0f')} % (n={c['runs']})"
+            if c["name"] == "vs dex" and a is not None and b:
+                s += f", {a / b:.1f}×"
+        elif c["name"] == "correlation":
+            s = _f(v, fmt=".2f")
+        else:
+            s = f"{_f(v, 100, '.0f')} %" + (f" (n={c['runs']})" if "runs" in c else "")
+        verdict = {True: "[green]yes[/green]", False: "[red]no[/red]", None: "n/a"}[c["met"]]
+        t.add_row(c["target"], s, verdict)
+    return t
+
+
+def plot_success(per_hand: dict, scope_aggs: dict, path: Path) -> Path:
+    """Grouped bars: strict success [%] per hand (and per scope), one bar per variant."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    groups = {**per_hand, **scope_aggs}
+    names = list(groups)
+    run_v = list(RUN_VARIANTS)
+    width = 0.8 / len(VARIANTS)
+    x = np.arange(len(names))
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.3 * len(names) + 2), 4.2))
+    for k, v in enumerate(VARIANTS):
+        xs = x - 0.4 + (k + 0.5) * width
+        if v in NOT_IMPLEMENTED:
+            for xi in xs:
+                ax.text(
+                    xi, 1.5, "n/a", rotation=90, ha="center", va="bottom", fontsize=7, color="0.4"
+                )
+            ax.bar(
+                xs,
+                np.zeros(len(names)),
+                width,
+                label=f"{LABELS[v]}: not implemented",
+                color="0.85",
+                hatch="//",
+            )
+            continue
+        vals = [groups[n][v]["success_rate"] for n in names]
+        h = [100 * (s or 0.0) for s in vals]
+        bars = ax.bar(xs, h, width, label=LABELS[v], color=f"C{run_v.index(v)}")
+        for b, s in zip(bars, vals, strict=True):
+            label = "–" if s is None else f"{100 * s:.0f}"
+            ax.text(
+                b.get_x() + b.get_width() / 2,
+                b.get_height() + 1,
+                label,
+                ha="center",
+                va="bottom",
+                fontsize=6,
+            )
+    ax.axhline(100 * TARGET_SUCCESS, color="k", lw=0.8, ls="--")
+    ax.text(len(names) - 0.5, 100 * TARGET_SUCCESS + 1, "target (d) 85 %", ha="right", fontsize=7)
+    ax.set_xticks(x, names)
+    ax.set_ylim(0, 110)
+    ax.set_ylabel("strict success [%] (no frame > 5 cm)")
+    ax.set_title("force preservation: re-simulated strict success by variant and hand")
+    ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.1))
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
+    fig.savefig(tmp, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+    os.replace(tmp, path)
+    return path
+
+
+# --------------------------------------------------------------------------------------- main
+def run_jobs(cfg: BenchConfig, demos: list, plans: list, hands: list, console):
+    """Every (pair, object) through the force pipeline, and as soon as one is done, its hand
+    jobs, over ``cfg.workers`` spawned one-thread processes. Returns ``(human_records, rows,
+    skipped)``: one record per human simulation, one row per hand × (pair, object) × variant,
+    and the (hand, pair)s a hand cannot perform."""
+    from retarget.errors import RetargetError
+    from retarget.run import check_pair
+
+    performable = {}
+    skipped = []
+    for i, (pair, _) in enumerate(demos):
+        performable[i] = []
+        for hand in hands:
+            try:
+                check_pair(hand, pair.manipulation_type)
+                performable[i].append(hand)
+            except RetargetError as e:
+                skipped.append({"hand": hand.name, "pair": str(pair), "reason": str(e)})
+    total = sum(len(p) * (1 + len(performable[i])) for i, p in enumerate(plans))
+    human: list[dict] = []
+    rows: list[dict] = []
+    ctx = multiprocessing.get_context("spawn")
+    with (
+        _one_thread_env(),
+        ProcessPoolExecutor(cfg.workers, mp_context=ctx, initializer=_init_worker) as pool,
+        progress_bar(console) as prog,
+    ):
+        task = prog.add_task("human force pipeline", total=total)
+        pending = {}
+        for i, (_, traj) in enumerate(demos):
+            for k, obj in enumerate(plans[i]):
+                job = ((i, k), traj, obj["object_id"], cfg.human_tracker)
+                pending[pool.submit(_human_sim, job)] = ("human", i, k)
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                kind, i, k = pending.pop(fut)
+                pair, traj = demos[i]
+                obj = plans[i][k]
+                prog.advance(task)
+                if kind == "hand":
+                    rows.extend(fut.result())
+                    prog.update(task, description=f"retargeting · {pair} · {obj['object_id']}")
+                    continue
+                res = fut.result()
+                prog.update(task, description=f"human force pipeline · {pair} · {obj['object_id']}")
+                rec = {"index": i, "pair": str(pair), **obj, **res["record"]}
+                human.append(rec)
+                for hand in performable[i]:
+                    base = {
+                        "hand": hand.name,
+                        "index": i,
+                        "pair": str(pair),
+                        "group": pair.manipulation_type.group,
+                        "manipulation_type": pair.manipulation_type.name,
+                        **obj,
+                        "frames": traj.num_frames,
+                        "uuid": traj.uuid,
+                        "human_forces": res["trajectory"] is not None,
+                    }
+                    job = (base, traj, res["trajectory"], cfg.dex_wrist)
+                    pending[pool.submit(_hand_job, job)] = ("hand", i, k)
+    human.sort(key=lambda r: (r["index"], r["object_variant"] == "heavy"))
+    return human, rows, skipped
+
+
+def run_benchmark(cfg: BenchConfig, console=None) -> dict:
+    """Run every hand × pair × object × variant, print the tables, write the JSON and the plot;
+    return the JSON document."""
+    from rich.console import Console
+
+    from dexcanvas_core.sim.pipeline import SimConfig
+    from dexcanvas_core.taxonomy import GROUPS
+    from retarget.hands import available_hands, get_hand
+
+    console = console or Console(width=None if sys.stdout.isatty() else 160)
+    cfg = cfg.validate()
+    t_start = time.perf_counter()
+    load0 = os.getloadavg()
+    hands = [get_hand(h) for h in (cfg.hands or available_hands())]
+    five = [h.name for h in hands if is_five_finger(h)]
+    demos, source, demo_failures = load_demonstrations(cfg, console)
+    if not demos:
+        raise SystemExit("no demonstrations to run")
+    plans = [object_plan(p, cfg.heavy) for p, _ in demos]
+    groups = {g: sum(1 for p, _ in demos if p.manipulation_type.group == g) for g in GROUPS}
+    n_heavy = sum(1 for p in plans for o in p if o["heavy_version_of"])
+    console.print(
+        f"{len(demos)} pairs from {source} ({', '.join(f'{g} {n}' for g, n in groups.items())})"
+        f" + {n_heavy} heavy version(s); hands: {', '.join(h.name for h in hands)}; human "
+        f"tracker {cfg.human_tracker}; {cfg.workers} worker(s)"
+    )
+
+    human, rows, skipped = run_jobs(cfg, demos, plans, hands, console)
+    hand_order = {h.name: k for k, h in enumerate(hands)}
+    rows.sort(
+        key=lambda r: (
+            hand_order[r["hand"]],
+            r["index"],
+            r["object_variant"] == "heavy",
+            r["variant"],
+        )
+    )
+    for r in rows:
+        if "error" in r:
+            console.print(
+                f"[red]{r['hand']} · {r['pair']} · {r['object_id']} · "
+                f"{LABELS[r['variant']]}: {r['error']}[/red]"
+            )
+
+    per_hand = {h.name: aggregate_variants([r for r in rows if r["hand"] == h.name]) for h in hands}
+    scopes = {ALL_HANDS: rows}
+    if five:
+        scopes = {FIVE_FINGER: [r for r in rows if r["hand"] in five], **scopes}
+    scope_aggs = {s: aggregate_variants(rs) for s, rs in scopes.items()}
+    hv = {s: heavy_vs_light(rs) for s, rs in scopes.items()}
+    target_scope = FIVE_FINGER if five else ALL_HANDS
+    checks = target_checks(
+        target_scope, scopes[target_scope], scope_aggs[target_scope], hv[target_scope]
+    )
+
+    console.print(human_table(human))
+    for h in hands:
+        n_skip = sum(1 for s in skipped if s["hand"] == h.name)
+        title = h.name + (" (five fingers)" if h.name in five else "")
+        if n_skip:
+            title += f" ({n_skip} pair(s) skipped: cannot perform)"
+        console.print(variants_table(title, per_hand[h.name]))
+    for s, a in scope_aggs.items():
+        if s == ALL_HANDS and len(hands) == 1:
+            continue  # the same as the one hand's table
+        names = ", ".join(five) if s == FIVE_FINGER else ", ".join(h.name for h in hands)
+        console.print(variants_table(f"{s} ({names})", a))
+    console.print(heavy_table(hv))
+    console.print(targets_table(target_scope, checks))
+
+    plot = plot_success(
+        per_hand, {s: a for s, a in scope_aggs.items() if len(hands) > 1}, cfg.plot_path()
+    )
+    doc = {
+        "benchmark": "force_preservation",
+        "command": " ".join(["python benchmarks/force_preservation.py", *sys.argv[1:]]),
+        "config": {**dataclasses.asdict(cfg), "out": str(cfg.out), "plot": str(plot)},
+        "human_sim_config": SimConfig(tracker=cfg.human_tracker).as_dict(),
+        "variants": {
+            v: {"label": LABELS[v], "implemented": v not in NOT_IMPLEMENTED} for v in VARIANTS
+        },
+        "demonstrations": {
+            "source": source,
+            "pairs": [str(p) for p, _ in demos],
+            "frames": {str(p): t.num_frames for p, t in demos},
+            "objects": {str(p): plans[i] for i, (p, _) in enumerate(demos)},
+            "generation_failures": demo_failures,
+        },
+        "human_simulations": human,
+        "human_simulations_failed": [
+            {
+                "pair": s["pair"],
+                "object_id": s["object_id"],
+                "failed_at_frame": s.get("failed_at_frame"),
+                "error": s.get("error"),
+            }
+            for s in human
+            if not s["success"]
+        ],
+        "hands": [h.name for h in hands],
+        "five_finger_hands": five,
+        "skipped": skipped,
+        "machine": {
+            "platform": platform.platform(),
+            "python": platform.python_version(),
+            "cpu_count": os.cpu_count(),
+            "loadavg_start": load0,
+            "loadavg_end": os.getloadavg(),
+            "threads_per_worker": 1,
+        },
+        "versions": versions(VERSION_DISTS),
+        "definitions": {
+            "success": "Resimulator strict rule (no frame with object error > 5 cm)",
+            "success_loose": "mean object error < 10 cm and < 0.5 rad",
+            "force_correlation_mean": "retarget.run.force_metrics: mean over corresponding "
+            "fingers of the correlation of human and re-simulated robot contact-force magnitude "
+            "profiles (frames where either exceeds 0.05 N)",
+            "object_force_error_mean_n": "mean over frames where the human touches of |sum of "
+            "robot contact forces - sum of human contact forces| on the object (force part of "
+            "the wrench; no torque: the re-simulation reports no contact points)",
+            "object_force_error_pct_weight": "object_force_error_mean_n / (m g) of the run's "
+            "object",
+            "*_successful": "over runs whose re-simulation met the strict rule",
+            "success_rate_with_human_forces": "over runs whose (pair, object) the force "
+            "pipeline reproduced",
+            "penetration_max_m": "deepest kinematic hand-object penetration of q (max over "
+            "frames; aggregates: max over runs)",
+            "sim_penetration_max_m": "deepest hand-object penetration in the re-simulation",
+            "ms_per_frame": "ours: RobotTrajectory.ms_per_frame (QP solve + squeeze or force "
+            "QP); dex-retargeting: its per-frame call; frame-weighted in aggregates",
+            "five_finger_hands": "hands with five distinct robot fingers",
+        },
+        "targets": checks,
+        "aggregates": {"per_scope": scope_aggs, "per_hand": per_hand, "heavy_vs_light": hv},
+        "runs": rows,
+        "wall_time_s": time.perf_counter() - t_start,
+    }
+    atomic_write_json(Path(cfg.out), doc)
+    console.print(f"wrote {cfg.out} and {plot} ({doc['wall_time_s']:.0f} s)")
+    return doc
+
+
+def main(argv: list[str] | None = None) -> int:
+    from retarget.hands import available_hands
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument(
+        "--hands",
+        nargs="+",
+        default=None,
+        choices=available_hands(),
+        help="hands to run (default: all)",
+    )
+    ap.add_argument("--n-pairs", type=int, default=20, help="pairs over the four groups")
+    ap.add_argument("--max-frames", type=int, default=None, help="crop each demonstration")
+    ap.add_argument(
+        "--human-tracker",
+        choices=TRACKERS,
+        default="mpc",
+        help="force pipeline tracker (open_loop: fast smoke runs)",
+    )
+    ap.add_argument(
+        "--heavy",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="also run heavy variants of the pairs' objects",
+    )
+    ap.add_argument("--workers", type=int, default=2, help="processes, one thread each")
+    ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON output")
+    ap.add_argument(
+        "--plot", type=Path, default=None, help="PNG output (default: the JSON path with .png)"
+    )
+    ap.add_argument("--operator", default="operator1")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--dex-wrist",
+        choices=("free", "fixed"),
+        default="free",
+        help="dex-retargeting's wrist: optimised (free) or the human wrist pose",
+    )
+    a = ap.parse_args(argv)
+    logging.basicConfig(level=logging.ERROR)
+    cfg = BenchConfig(
+        hands=tuple(dict.fromkeys(a.hands)) if a.hands else None,
+        n_pairs=a.n_pairs,
+        max_frames=a.max_frames,
+        human_tracker=a.human_tracker,
+        heavy=a.heavy,
+        workers=a.workers,
+        out=a.out,
+        plot=a.plot,
+        operator=a.operator,
+        seed=a.seed,
+        dex_wrist=a.dex_wrist,
+    )
+    run_benchmark(cfg)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
