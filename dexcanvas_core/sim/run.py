@@ -80,9 +80,13 @@ def run_simulate(cfg: SimulateConfig) -> dict:
         json.dumps(metrics, indent=2, sort_keys=True, default=float),
     )
     if cfg.plot:
+        from dexcanvas_core.errors import MissingDependencyError
         from dexcanvas_core.sim.plots import plot_finger_forces
 
-        plot_finger_forces(res, out.with_name(out.name + ".forces.png"), title=cfg.pair)
+        try:
+            plot_finger_forces(res, out.with_name(out.name + ".forces.png"), title=cfg.pair)
+        except MissingDependencyError as e:  # the data is written; only the picture is missing
+            print(f"note: no force plot ({e})")
     if cfg.progress:
         print_summary(metrics, out)
     return metrics
