@@ -132,9 +132,9 @@ def build_refine_scene(hand, geometry, fps: float, cfg: RefineConfig, tip_sites:
     )  # fmt: skip
     eq.active = False
     first_sensor = len(spec.sensors)
-    for s in tip_sites:
+    for i, s in enumerate(tip_sites):  # a gripper lists one robot finger for two human ones
         spec.add_sensor(
-            name=f"refine_{s}", type=mujoco.mjtSensor.mjSENS_FRAMEPOS,
+            name=f"refine_{i}_{s}", type=mujoco.mjtSensor.mjSENS_FRAMEPOS,
             objtype=mujoco.mjtObj.mjOBJ_SITE, objname=s,
             reftype=mujoco.mjtObj.mjOBJ_BODY, refname=OBJECT_BODY,
         )  # fmt: skip

@@ -249,3 +249,21 @@ def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
     assert m["frames_tracked"] == demo.num_frames and m["compute_s"] > 0
     with pytest.raises(RetargetError, match="unknown refinement tracker"):
         refine(hand, geo, demo, robot, rt.tip_sites, RefineConfig(tracker="ppo"))
+
+
+def test_refinement_runs_on_a_gripper_whose_fingers_are_shared():
+    """The panda gripper drives index and middle with one finger: one tip site, listed twice."""
+    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.loaders.selection import load_demonstration
+    from retarget.hands import get_hand
+    from retarget.refine import RefineConfig, refine
+    from retarget.retargeter import Retargeter
+
+    demo = load_demonstration("cube2/tripod").slice(250, 300)
+    hand, geo = get_hand("panda"), object_geometry("cube2")
+    rt = Retargeter(hand, geo)
+    assert len(set(rt.tip_sites)) < len(rt.tip_sites)
+    res = refine(
+        hand, geo, demo, rt.retarget(demo), rt.tip_sites, RefineConfig(tracker="open_loop")
+    )
+    assert res.object_pos_err.shape[0] >= 1
