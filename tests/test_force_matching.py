@@ -267,3 +267,28 @@ def test_refinement_runs_on_a_gripper_whose_fingers_are_shared():
         hand, geo, demo, rt.retarget(demo), rt.tip_sites, RefineConfig(tracker="open_loop")
     )
     assert res.object_pos_err.shape[0] >= 1
+
+
+def test_viz_replays_a_force_matching_run_exactly(human_with_forces, tmp_path):
+    """Stills and reports replay the run's re-simulation: with --forces, its stiff contacts."""
+    import json
+
+    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.io import write_dataset
+    from retarget.cli import main
+    from retarget.hands import get_hand
+    from retarget.viz.data import record_resimulation
+
+    traj = human_with_forces.slice(250, 400)
+    src = tmp_path / "h.lance"
+    write_dataset([traj], src)
+    out = tmp_path / "run"
+    assert main(["run", "--hand", "allegro", "--pair", "cube2/tripod", "--dataset", str(src),
+                 "--forces", "--quiet", "--out", str(out)]) == 0  # fmt: skip
+    metrics = json.loads((out / "metrics.json").read_text())
+    with np.load(out / "robot_trajectory.npz") as z:
+        q_command, obj = z["q_command"], z["object_pos_sim"]
+    rec = record_resimulation(
+        get_hand("allegro"), object_geometry("cube2"), q_command, traj, metrics=metrics
+    )
+    np.testing.assert_allclose(rec.result.object_pos_sim, obj, atol=1e-9)

@@ -391,8 +391,12 @@ def record_resimulation(
     q_command: np.ndarray,
     human: Trajectory,
     progress: Callable[[int, int], None] | None = None,
+    metrics: dict | None = None,
 ) -> RobotSimRecord:
     """Re-simulate ``q_command`` like ``retarget run`` does and record the robot's state.
+
+    ``metrics``: the run's ``metrics.json``; a force-matching run (``"forces": true``) was
+    re-simulated with stiff contacts, and is replayed the same way.
 
     The simulation is the one of ``retarget.validate.Resimulator`` (same model, same settings,
     deterministic); after each data frame the simulated hand joints and every hand–object
@@ -409,7 +413,13 @@ def record_resimulation(
             self.last_data = d
             return super()._contact_forces(d)
 
-    sim = RecordingResimulator(hand, geometry)
+    from retarget.run import FORCE_CONTACT_TIMECONST
+    from retarget.validate import ValidateConfig
+
+    stiff = bool(metrics and metrics.get("forces"))
+    sim = RecordingResimulator(
+        hand, geometry, ValidateConfig(contact_timeconst=FORCE_CONTACT_TIMECONST if stiff else None)
+    )
     m = sim.model
     group_of_body, part_of_body = robot_body_parts(hand, m)
     T = human.num_frames
@@ -532,7 +542,9 @@ def scene_data(
         if sim is None:
             if human is None:
                 raise VizError("showing the re-simulated hand needs the human demonstration")
-            sim = record_resimulation(hand, object_geometry(pair.object.id), a["q_command"], human)
+            sim = record_resimulation(
+                hand, object_geometry(pair.object.id), a["q_command"], human, metrics=m
+            )
         qpos = sim.qpos
         robot_contacts = sim.contacts
         obj_pos, obj_rot = a["object_pos_sim"], a["object_rot_sim"]

@@ -98,7 +98,9 @@ def _section(run_dir: Path, cfg: ReportConfig) -> RunSection:
         sec.notes.append(f"demonstration not available ({e}): no human data, no stills")
     sim = None
     if human is not None:
-        sim = record_resimulation(hand, geometry, run.arrays["q_command"], human)
+        sim = record_resimulation(
+            hand, geometry, run.arrays["q_command"], human, metrics=run.metrics
+        )
         hc = human_contacts(human, geometry)
         if hc.source.startswith("inferred"):
             sec.notes.append(

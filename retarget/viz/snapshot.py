@@ -293,8 +293,9 @@ def run_snapshot(cfg: SnapshotConfig) -> dict:
     if cfg.robot == "sim":
         pair_object = run.metrics["pair"].split("/", 1)[0]
         sim = record_resimulation(
-            hand, object_geometry(pair_object), run.arrays["q_command"], human
-        )
+            hand, object_geometry(pair_object), run.arrays["q_command"], human,
+            metrics=run.metrics,
+        )  # fmt: skip
     data = scene_data(run, human, hand=hand, robot_source=cfg.robot, sim=sim)
     return draw(hand, data, frames, out_dir, cfg=cfg, renderer=renderer, run_dir=run.run_dir)
 
