@@ -22,6 +22,7 @@ import mujoco
 import numpy as np
 
 from dexcanvas_core.rotations import aa_to_quat_wxyz, quat_wxyz_to_aa, rotation_angle_between_aa
+from dexcanvas_core.sim.forces import object_contacts
 from dexcanvas_core.trajectory import Trajectory
 from retarget.errors import RetargetError
 from retarget.scene import OBJECT_BODY, add_object, add_table
@@ -224,26 +225,12 @@ class Resimulator:
 
     def _contact_forces(self, d: mujoco.MjData) -> tuple[np.ndarray, float]:
         """(F+1, 3) hand-part forces on the object [N] and the deepest penetration [m]."""
-        m = self.model
         out = np.zeros((len(self.fingers) + 1, 3))
         pen = 0.0
-        f6 = np.zeros(6)
-        for i in range(d.ncon):
-            c = d.contact[i]
-            b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
-            # mj_contactForce's force acts on geom2 (DESIGN.md): it is the force on the object
-            # when the object is geom2, and minus it when the object is geom1.
-            if b1 == self.object_body:
-                hand_body, on_object = b2, -1.0
-            elif b2 == self.object_body:
-                hand_body, on_object = b1, 1.0
-            else:
-                continue
-            part = self.body_part[hand_body]
+        for c in object_contacts(self.model, d, self.object_body):
+            part = self.body_part[c.other_body]
             if part < 0:
                 continue  # the table
-            mujoco.mj_contactForce(m, d, i, f6)
-            frame = np.asarray(c.frame).reshape(3, 3)  # rows: normal, tangent 1, tangent 2
-            out[part] += on_object * (frame.T @ f6[:3])  # contact frame → world
-            pen = max(pen, -float(c.dist))
+            out[part] += c.force
+            pen = max(pen, -c.dist)
         return out, pen

@@ -23,6 +23,54 @@ import numpy as np
 from dexcanvas_core.trajectory import CONTACT_PARTS, FORCE_GROUPS, Contacts, part_group
 
 
+@dataclass(frozen=True)
+class ObjectContact:
+    """One MuJoCo contact touching the object, in the world frame."""
+
+    index: int  # into data.contact
+    object_geom: int
+    other_geom: int
+    other_body: int
+    pos: np.ndarray  # (3,) [m]
+    normal: np.ndarray  # (3,) unit, from the other geom into the object
+    force: np.ndarray  # (3,) [N] on the object
+    torque: np.ndarray  # (3,) [N·m] torsional/rolling torque on the object
+    dist: float  # signed distance [m] (negative: penetration)
+
+
+def object_contacts(model: mujoco.MjModel, data: mujoco.MjData, object_body: int):
+    """Every active contact between ``object_body`` and anything else (the recipe of the module
+    docstring: the contact-frame force acts on ``geom[1]``, flipped when the object is
+    ``geom[0]``). The one reader of contact forces for the force pipeline, the robot
+    re-simulation and the visualisation."""
+    f6 = np.zeros(6)
+    for i in range(data.ncon):
+        c = data.contact[i]
+        g1, g2 = int(c.geom1), int(c.geom2)
+        b1, b2 = model.geom_bodyid[g1], model.geom_bodyid[g2]
+        if b2 == object_body and b1 != object_body:
+            obj, other, sign = g2, g1, 1.0
+        elif b1 == object_body and b2 != object_body:
+            obj, other, sign = g1, g2, -1.0
+        else:
+            continue
+        if c.efc_address < 0:
+            continue
+        mujoco.mj_contactForce(model, data, i, f6)
+        R = c.frame.reshape(3, 3)  # rows: normal (geom1 → geom2), t1, t2 (world)
+        yield ObjectContact(
+            index=i,
+            object_geom=obj,
+            other_geom=other,
+            other_body=int(model.geom_bodyid[other]),
+            pos=c.pos.copy(),
+            normal=sign * R[0],
+            force=sign * (R.T @ f6[:3]),
+            torque=sign * (R.T @ f6[3:]),
+            dist=float(c.dist),
+        )
+
+
 @dataclass
 class StepContacts:
     """Hand–object and table–object contacts of one physics step (world frame, on the object)."""
@@ -39,42 +87,24 @@ class StepContacts:
 
 def read_contacts(scene, data: mujoco.MjData) -> StepContacts:
     """The contacts acting on the object in ``data`` (after ``mj_step`` or ``mj_forward``)."""
-    m = scene.model
-    obj_geoms = scene.object_geoms
     hand_part = scene.hand.geom_part
     com = data.xipos[scene.object_body]
-    f6 = np.zeros(6)
     hg, og, pos, nrm, frc, trq = [], [], [], [], [], []
     table_f = np.zeros(3)
     table_t = np.zeros(3)
-    for i in range(data.ncon):
-        c = data.contact[i]
-        g1, g2 = int(c.geom1), int(c.geom2)
-        if g2 in obj_geoms:
-            obj, other, sign = g2, g1, 1.0
-        elif g1 in obj_geoms:
-            obj, other, sign = g1, g2, -1.0
-        else:
+    for c in object_contacts(scene.model, data, scene.object_body):
+        if c.other_geom == scene.table_geom:
+            table_f += c.force
+            table_t += np.cross(c.pos - com, c.force) + c.torque
             continue
-        if c.efc_address < 0:
+        if c.other_geom not in hand_part:
             continue
-        mujoco.mj_contactForce(m, data, i, f6)
-        R = c.frame.reshape(3, 3)  # rows: normal, t1, t2 (world)
-        f = sign * (R.T @ f6[:3])  # force on the object [N]
-        tq = sign * (R.T @ f6[3:])
-        p = c.pos.copy()
-        if other == scene.table_geom:
-            table_f += f
-            table_t += np.cross(p - com, f) + tq
-            continue
-        if other not in hand_part:
-            continue
-        hg.append(other)
-        og.append(obj)
-        pos.append(p)
-        nrm.append(sign * R[0])  # frame normal points from geom1 to geom2
-        frc.append(f)
-        trq.append(tq)
+        hg.append(c.other_geom)
+        og.append(c.object_geom)
+        pos.append(c.pos)
+        nrm.append(c.normal)
+        frc.append(c.force)
+        trq.append(c.torque)
 
     def arr(x, shape):
         return np.asarray(x, dtype=np.float64).reshape(shape)

@@ -404,6 +404,7 @@ def record_resimulation(
     """
     import mujoco
 
+    from dexcanvas_core.sim.forces import object_contacts
     from retarget.validate import Resimulator
 
     class RecordingResimulator(Resimulator):
@@ -430,28 +431,11 @@ def record_resimulation(
         t = done - 1
         d = sim.last_data
         qpos[t] = d.qpos[: sim.hand_nq]
-        f6 = np.zeros(6)
-        for i in range(d.ncon):
-            c = d.contact[i]
-            b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
-            if b1 == sim.object_body:
-                hand_body, sign = b2, -1.0
-            elif b2 == sim.object_body:
-                hand_body, sign = b1, 1.0
-            else:
-                continue
-            if group_of_body[hand_body] < 0:
+        for c in object_contacts(m, d, sim.object_body):
+            if group_of_body[c.other_body] < 0:
                 continue  # the table
-            mujoco.mj_contactForce(m, d, i, f6)
-            frame = np.asarray(c.frame).reshape(3, 3)  # rows: normal, tangent 1, tangent 2
-            force = sign * (frame.T @ f6[:3])  # force on geom2 → force of the hand on the object
             records[t].append(
-                (
-                    np.array(c.pos),
-                    force,
-                    int(group_of_body[hand_body]),
-                    int(part_of_body[hand_body]),
-                )
+                (c.pos, c.force, int(group_of_body[c.other_body]), int(part_of_body[c.other_body]))
             )
         if progress is not None:
             progress(done, total)
