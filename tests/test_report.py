@@ -8,6 +8,7 @@ import re
 
 import numpy as np
 import pytest
+from system_packages import requires
 from test_viz import FINGER_FORCE_N, HAS_CHROMIUM, dataset  # noqa: F401 (a fixture)
 
 from dexcanvas_core.trajectory import FORCE_GROUPS
@@ -67,9 +68,7 @@ def test_report_is_offline_and_complete(report):
         assert text in page
 
 
-@pytest.mark.skipif(
-    not HAS_CHROMIUM, reason="headless Chromium not installed (apt-get install chromium)"
-)
+@requires(HAS_CHROMIUM, "headless Chromium not installed (apt-get install chromium)")
 def test_report_images_resolve_in_headless_chromium(report, tmp_path):
     probe = tmp_path / "probe.html"
     probe.write_text(report.read_text().replace("</body>", IMG_PROBE + "</body>"))

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PIL import Image
+from system_packages import require, requires
 
 from dexcanvas_core.demos import generate_demo
 from dexcanvas_core.demos.geometry import object_geometry
@@ -46,8 +47,8 @@ from retarget.viz.meshcat_scene import (
 from retarget.viz.view import SceneOptions
 
 HAS_CHROMIUM = chromium.find_chromium() is not None
-needs_chromium = pytest.mark.skipif(
-    not HAS_CHROMIUM, reason="headless Chromium not installed (apt-get install chromium)"
+needs_chromium = requires(
+    HAS_CHROMIUM, "headless Chromium not installed (apt-get install chromium)"
 )
 FINGER_FORCE_N = {"thumb": 3.0, "index": 2.0, "middle": 1.0, "ring": 0.5, "pinky": 0.5, "palm": 1.0}
 """Force [N] of each synthetic contact record, by finger."""
@@ -349,7 +350,7 @@ def test_mujoco_renderer(backend, snap, tmp_path, monkeypatch):
     lib = {"egl": "EGL", "osmesa": "OSMesa"}[backend]
     if ctypes.util.find_library(lib) is None:
         hint = {"egl": "libegl1 libegl-mesa0 libgl1-mesa-dri", "osmesa": "libosmesa6"}[backend]
-        pytest.skip(f"lib{lib} missing (apt-get install {hint})")
+        require(False, f"lib{lib} missing (apt-get install {hint})")
     monkeypatch.setenv("MUJOCO_GL", backend)
     out = tmp_path / "mj"
     argv = [
