@@ -1,9 +1,11 @@
 """Building and solving the per-iterate QP on the joint step ``Δq``.
 
-``build_qp`` sums the objectives' ``(H, c)`` terms (plus Levenberg–Marquardt damping) and stacks
-the limits' rows; ``solve_qp`` hands the problem to ``qpsolvers`` (``daqp`` by default). Keeping
-the two apart lets tests inspect the problem, and a failed solve raises with the problem attached
-instead of silently returning the previous pose.
+``build_qp`` sums the objectives' ``(H, c)`` terms (plus Levenberg–Marquardt damping), stacks
+the limits' rows and intersects their box bounds (joint ranges, velocity: ``lb ≤ Δq ≤ ub``, which
+the solver treats as simple bounds instead of ``2 nv`` general rows); ``solve_qp`` calls DAQP
+directly (the default) or any other solver through ``qpsolvers``. Keeping the two apart lets tests
+inspect the problem, and a failed solve raises with the problem attached instead of silently
+returning the previous pose.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from retarget.state import RobotState
 
 @dataclass
 class QPProblem:
-    """``min ½ Δqᵀ P Δq + qᵀ Δq  s.t.  G Δq ≤ h,  A Δq = b``."""
+    """``min ½ Δqᵀ P Δq + qᵀ Δq  s.t.  G Δq ≤ h,  A Δq = b,  lb ≤ Δq ≤ ub``."""
 
     P: np.ndarray
     q: np.ndarray
@@ -29,6 +31,10 @@ class QPProblem:
     h: np.ndarray
     A: np.ndarray
     b: np.ndarray
+    lb: np.ndarray | None = None
+    """(nv,) lower bounds (``-inf``: none); ``None``: no bounds at all."""
+    ub: np.ndarray | None = None
+    """(nv,) upper bounds (``inf``: none); ``None``: no bounds at all."""
 
 
 class QPSolveError(RetargetError):
@@ -54,37 +60,83 @@ def build_qp(
         P += H
         c += g
     Gs, hs, As, bs = [np.zeros((0, nv))], [np.zeros(0)], [np.zeros((0, nv))], [np.zeros(0)]
+    lb = ub = None
     for lim in limits:
+        box = lim.bounds(state)
+        if box is not None:
+            lo, hi = box
+            lb = lo if lb is None else np.maximum(lb, lo)
+            ub = hi if ub is None else np.minimum(ub, hi)
         G, h = lim.inequalities(state)
+        if G.shape[0]:
+            Gs.append(G)
+            hs.append(h)
         A, b = lim.equalities(state)
-        Gs.append(G)
-        hs.append(h)
-        As.append(A)
-        bs.append(b)
+        if A.shape[0]:
+            As.append(A)
+            bs.append(b)
     return QPProblem(
         P=0.5 * (P + P.T),
         q=c,
-        G=np.concatenate(Gs),
-        h=np.concatenate(hs),
-        A=np.concatenate(As),
-        b=np.concatenate(bs),
+        G=np.concatenate(Gs) if len(Gs) > 2 else Gs[-1],
+        h=np.concatenate(hs) if len(hs) > 2 else hs[-1],
+        A=np.concatenate(As) if len(As) > 2 else As[-1],
+        b=np.concatenate(bs) if len(bs) > 2 else bs[-1],
+        lb=lb,
+        ub=ub,
     )
 
 
-def solve_qp(problem: QPProblem, solver: str = "daqp") -> np.ndarray:
-    """Solve with ``qpsolvers``; raise :class:`QPSolveError` (problem attached) on failure."""
-    import qpsolvers
+_DAQP_INF = 1e30  # DAQP's "no bound"
 
-    if solver not in qpsolvers.available_solvers:
-        raise RetargetError(
-            f"QP solver {solver!r} is not installed; available: "
-            f"{', '.join(qpsolvers.available_solvers)}"
+
+def _solve_daqp(problem: QPProblem) -> np.ndarray | None:
+    """DAQP called directly: box bounds as its simple bounds, then ``G``, then ``A`` (equal)."""
+    try:
+        import daqp
+    except ImportError:
+        raise RetargetError("QP solver 'daqp' is not installed (pip install daqp)") from None
+    nv = problem.q.shape[0]
+    mi, me = problem.G.shape[0], problem.A.shape[0]
+    ms = nv if problem.lb is not None or problem.ub is not None else 0
+    upper = np.empty(ms + mi + me)
+    lower = np.full(ms + mi + me, -_DAQP_INF)
+    if ms:
+        upper[:ms] = _DAQP_INF if problem.ub is None else np.minimum(problem.ub, _DAQP_INF)
+        if problem.lb is not None:
+            lower[:ms] = np.maximum(problem.lb, -_DAQP_INF)
+    upper[ms : ms + mi] = problem.h
+    upper[ms + mi :] = problem.b
+    lower[ms + mi :] = problem.b
+    sense = np.zeros(ms + mi + me, dtype=np.intc)
+    sense[ms + mi :] = 5  # equality (active and immutable)
+    A = problem.G if not me else (problem.A if not mi else np.vstack([problem.G, problem.A]))
+    x, _, exitflag, _ = daqp.solve(
+        problem.P, problem.q, np.ascontiguousarray(A), upper, lower, sense
+    )
+    return x if exitflag > 0 else None
+
+
+def solve_qp(problem: QPProblem, solver: str = "daqp") -> np.ndarray:
+    """Solve (DAQP directly, any other ``qpsolvers`` solver by name); raise
+    :class:`QPSolveError` (problem attached) on failure."""
+    if solver == "daqp":
+        x = _solve_daqp(problem)
+    else:
+        import qpsolvers
+
+        if solver not in qpsolvers.available_solvers:
+            raise RetargetError(
+                f"QP solver {solver!r} is not installed; available: daqp, "
+                f"{', '.join(qpsolvers.available_solvers)}"
+            )
+        G = problem.G if problem.G.shape[0] else None
+        h = problem.h if problem.h.shape[0] else None
+        A = problem.A if problem.A.shape[0] else None
+        b = problem.b if problem.b.shape[0] else None
+        x = qpsolvers.solve_qp(
+            problem.P, problem.q, G, h, A, b, lb=problem.lb, ub=problem.ub, solver=solver
         )
-    G = problem.G if problem.G.shape[0] else None
-    h = problem.h if problem.h.shape[0] else None
-    A = problem.A if problem.A.shape[0] else None
-    b = problem.b if problem.b.shape[0] else None
-    x = qpsolvers.solve_qp(problem.P, problem.q, G, h, A, b, solver=solver)
     if x is None or not np.all(np.isfinite(x)):
         # Infeasible limits (e.g. a coupling that contradicts a bound): report, don't hide.
         raise QPSolveError(

@@ -28,6 +28,20 @@ class Kinematics(Protocol):
         """(3, nv): a point fixed to ``body``, given in world coordinates."""
         ...
 
+    # Batched forms (one call per objective instead of one per site: the per-iterate Python
+    # overhead is what the solver's speed depends on).
+    def site_positions(self, sites: tuple[str, ...]) -> np.ndarray:
+        """(k, 3) [m] world positions."""
+        ...
+
+    def site_jacobians(self, sites: tuple[str, ...]) -> np.ndarray:
+        """(k, 6, nv): :meth:`site_jacobian` of each site."""
+        ...
+
+    def point_jacobians(self, bodies: tuple[str, ...], p_world: np.ndarray) -> np.ndarray:
+        """(k, 3, nv): :meth:`point_jacobian` of points (k, 3), one body each."""
+        ...
+
 
 @dataclass
 class RobotState:

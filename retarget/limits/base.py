@@ -8,13 +8,17 @@ from retarget.state import RobotState
 
 
 class Limit:
-    """Base of the QP limits; override one or both methods.
+    """Base of the QP limits; override any of the methods.
 
     ``inequalities`` returns rows ``(G, h)`` with ``G Δq ≤ h``; ``equalities`` returns ``(A, b)``
-    with ``A Δq = b``. The defaults add no rows.
+    with ``A Δq = b``; ``bounds`` returns ``(lb, ub)`` with ``lb ≤ Δq ≤ ub`` (per joint, ±inf for
+    none), which the solver handles as simple bounds. The defaults add nothing.
     """
 
     name: str = "limit"
+
+    def bounds(self, state: RobotState) -> tuple[np.ndarray, np.ndarray] | None:
+        return None
 
     def inequalities(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros((0, state.nv)), np.zeros(0)

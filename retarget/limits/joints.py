@@ -9,7 +9,7 @@ from retarget.state import RobotState
 
 
 class JointLimit(Limit):
-    """``lower ≤ q + Δq ≤ upper`` for limited joints."""
+    """``lower ≤ q + Δq ≤ upper`` for limited joints (box bounds on the step)."""
 
     name = "joint_limits"
 
@@ -20,25 +20,25 @@ class JointLimit(Limit):
             np.ones_like(self.lower, bool) if limited is None else np.asarray(limited, bool)
         )
 
-    def inequalities(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
+    def bounds(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         idx = np.flatnonzero(self.limited)
-        eye = np.eye(state.nv)[idx]
         q = state.q[idx]
+        lb = np.full(state.nv, -np.inf)
+        ub = np.full(state.nv, np.inf)
         # Clip so that a start slightly outside the range still gives a feasible QP.
-        h_up = np.maximum(self.upper[idx] - q, 0.0)
-        h_lo = np.maximum(q - self.lower[idx], 0.0)
-        return np.concatenate([eye, -eye]), np.concatenate([h_up, h_lo])
+        ub[idx] = np.maximum(self.upper[idx] - q, 0.0)
+        lb[idx] = -np.maximum(q - self.lower[idx], 0.0)
+        return lb, ub
 
 
 class VelocityLimit(Limit):
-    """``|Δq| ≤ v_max · dt`` per joint (``v_max`` [rad/s] or [m/s])."""
+    """``|Δq| ≤ v_max · dt`` per joint (``v_max`` [rad/s] or [m/s]; box bounds on the step)."""
 
     name = "velocity"
 
     def __init__(self, v_max: np.ndarray | float):
         self.v_max = v_max
 
-    def inequalities(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
-        v = np.broadcast_to(np.asarray(self.v_max, dtype=np.float64), (state.nv,))
-        eye = np.eye(state.nv)
-        return np.concatenate([eye, -eye]), np.concatenate([v, v]) * state.dt
+    def bounds(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
+        v = np.broadcast_to(np.asarray(self.v_max, dtype=np.float64), (state.nv,)) * state.dt
+        return -v, v.copy()

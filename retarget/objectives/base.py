@@ -30,8 +30,10 @@ class Objective(ABC):
         """(m, nv) derivative of :meth:`error` with respect to ``q``."""
 
     def weights(self, m: int) -> np.ndarray:
-        w = np.broadcast_to(np.asarray(self.weight, dtype=np.float64), (m,))
-        return w
+        w = self.weight
+        if np.ndim(w) == 0:
+            return np.full(m, float(w))
+        return np.broadcast_to(np.asarray(w, dtype=np.float64), (m,))
 
     def qp_terms(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         """``(H, c)`` with ``H = Jᵀ W J`` and ``c = Jᵀ W e``."""
@@ -39,8 +41,7 @@ class Objective(ABC):
         if e.size == 0:
             return np.zeros((state.nv, state.nv)), np.zeros(state.nv)
         J = self.jacobian(state)
-        w = self.weights(e.shape[0])
-        JW = J.T * w
+        JW = J.T * self.weights(e.shape[0])
         return JW @ J, JW @ e
 
     def cost(self, state: RobotState) -> float:

@@ -167,6 +167,8 @@ class SurfaceContactObjective(Objective):
         if not self.active.any():
             return np.zeros((0, state.nv))
         pts = self.finger_points(state.q)
-        return np.concatenate(
-            [state.kin.point_jacobian(*pts[i]) for i in np.flatnonzero(self.active)], axis=0
+        idx = np.flatnonzero(self.active).tolist()
+        J = state.kin.point_jacobians(
+            tuple(pts[i][0] for i in idx), np.array([pts[i][1] for i in idx])
         )
+        return J.reshape(-1, state.nv)

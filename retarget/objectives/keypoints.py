@@ -19,6 +19,7 @@ class KeypointObjective(Objective):
     def __init__(self, sites: Sequence[str], weight: float | np.ndarray = 1.0):
         super().__init__(weight)
         self.sites = list(sites)
+        self._sites = tuple(self.sites)
         self.targets = np.zeros((len(self.sites), 3))
 
     def set_targets(self, targets_world: np.ndarray) -> None:
@@ -38,17 +39,14 @@ class KeypointObjective(Objective):
         return np.broadcast_to(w, (m,))
 
     def error(self, state: RobotState) -> np.ndarray:
-        p = (
-            np.stack([state.kin.site_position(s) for s in self.sites])
-            if self.sites
-            else self.targets
-        )
-        return (p - self.targets).reshape(-1)
+        if not self.sites:
+            return np.zeros(0)
+        return (state.kin.site_positions(self._sites) - self.targets).reshape(-1)
 
     def jacobian(self, state: RobotState) -> np.ndarray:
         if not self.sites:
             return np.zeros((0, state.nv))
-        return np.concatenate([state.kin.site_jacobian(s)[:3] for s in self.sites], axis=0)
+        return state.kin.site_jacobians(self._sites)[:, :3].reshape(-1, state.nv)
 
 
 class VectorObjective(Objective):
@@ -63,6 +61,8 @@ class VectorObjective(Objective):
     def __init__(self, pairs: Sequence[tuple[str, str]], weight: float | np.ndarray = 1.0):
         super().__init__(weight)
         self.pairs = list(pairs)
+        self._a = tuple(a for a, _ in self.pairs)
+        self._b = tuple(b for _, b in self.pairs)
         self.targets = np.zeros((len(self.pairs), 3))
 
     def set_targets(self, vectors_world: np.ndarray) -> None:
@@ -83,13 +83,12 @@ class VectorObjective(Objective):
         if not self.pairs:
             return np.zeros(0)
         k = state.kin
-        d = np.stack([k.site_position(a) - k.site_position(b) for a, b in self.pairs])
+        d = k.site_positions(self._a) - k.site_positions(self._b)
         return (d - self.targets).reshape(-1)
 
     def jacobian(self, state: RobotState) -> np.ndarray:
         if not self.pairs:
             return np.zeros((0, state.nv))
         k = state.kin
-        return np.concatenate(
-            [k.site_jacobian(a)[:3] - k.site_jacobian(b)[:3] for a, b in self.pairs], axis=0
-        )
+        J = k.site_jacobians(self._a)[:, :3] - k.site_jacobians(self._b)[:, :3]
+        return J.reshape(-1, state.nv)

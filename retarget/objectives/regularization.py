@@ -24,6 +24,12 @@ class PostureObjective(Objective):
     def jacobian(self, state: RobotState) -> np.ndarray:
         return np.eye(state.nv)[self.mask]
 
+    def qp_terms(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
+        # J = S (a row selection): JᵀWJ is diagonal and JᵀWe scatters W e; no matrix products.
+        w = np.zeros(state.nv)
+        w[self.mask] = self.weights(int(self.mask.sum()))
+        return np.diag(w), w * (state.q - self.q_ref)
+
 
 class SmoothnessObjective(Objective):
     """Stay near the previous frame's solution: ``e = q − q_prev`` (temporal smoothness)."""
@@ -46,3 +52,9 @@ class SmoothnessObjective(Objective):
         if self.q_prev is None:
             return np.zeros((0, state.nv))
         return np.eye(state.nv)
+
+    def qp_terms(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
+        if self.q_prev is None:
+            return np.zeros((state.nv, state.nv)), np.zeros(state.nv)
+        w = self.weights(state.nv)  # J = I
+        return np.diag(w), w * (state.q - self.q_prev)

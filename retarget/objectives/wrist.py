@@ -2,12 +2,25 @@
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from retarget.errors import RetargetError
 from retarget.objectives.base import Objective
 from retarget.state import RobotState
+
+
+def rotation_log(R: np.ndarray) -> np.ndarray:
+    """(3,) rotation vector [rad] of a rotation matrix (angle in [0, π]), via its quaternion
+    (``mju_mat2Quat`` is robust near π, where the matrix formula loses precision)."""
+    quat = np.empty(4)
+    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(R, dtype=np.float64).reshape(9))
+    if quat[0] < 0:
+        quat = -quat  # the short way round
+    s = np.linalg.norm(quat[1:])
+    if s < 1e-12:
+        return 2.0 * quat[1:]  # first order: v = 2 sin(θ/2) axis ≈ θ axis
+    return quat[1:] * (2.0 * np.arctan2(s, quat[0]) / s)
 
 
 class WristPoseObjective(Objective):
@@ -48,8 +61,7 @@ class WristPoseObjective(Objective):
     def error(self, state: RobotState) -> np.ndarray:
         p = state.kin.site_position(self.site)
         R = state.kin.site_rotation(self.site)
-        rot = Rotation.from_matrix(R @ self.R_target.T).as_rotvec()
-        return np.concatenate([p - self.p_target, rot])
+        return np.concatenate([p - self.p_target, rotation_log(R @ self.R_target.T)])
 
     def jacobian(self, state: RobotState) -> np.ndarray:
         return state.kin.site_jacobian(self.site)
