@@ -131,12 +131,21 @@ def _human_forces(traj, pair, prog):
     return res.trajectory, m
 
 
+def _corr(a: np.ndarray, b: np.ndarray) -> float | None:
+    """Pearson correlation, ``None`` when either side is constant."""
+    if a.std() <= 0 or b.std() <= 0:
+        return None
+    return float(np.corrcoef(a, b)[0, 1])
+
+
 def force_metrics(robot, sim, human, retargeter) -> dict:
     """Force preservation of a force-matched run: per corresponding finger, the correlation of
-    the human's and the re-simulated robot's contact-force magnitude profiles and their relative
-    magnitude error; the object force error (robot fingers' summed force vs the human hand's)
-    over frames where the human holds the object off the table (and, for reference, over all
-    contact frames); contact precision/recall (robot finger in contact vs
+    the human's and the re-simulated robot's contact-force magnitudes — over the frames where
+    either touches (``correlation``: does the force vary alike while in contact) and over the
+    whole demonstration (``profile_correlation``: the force profile, on/off timing included) —
+    and their relative magnitude error; the object force error (robot fingers' summed force vs
+    the human hand's) over frames where the human holds the object off the table (and, for
+    reference, over all contact frames); contact precision/recall (robot finger in contact vs
     human finger in contact); the share of frames whose required force the QP could produce
     (shortfall below 10 % of it or 0.05 N)."""
     from dexcanvas_core.trajectory import FORCE_GROUPS
@@ -149,12 +158,13 @@ def force_metrics(robot, sim, human, retargeter) -> dict:
     for i, f in enumerate(retargeter.tip_human):
         h, r = H[:, i], R[:, i]
         on = (h > 0.05) | (r > 0.05)
-        corr = None
-        if on.sum() > 2 and h[on].std() > 0 and r[on].std() > 0:
-            corr = float(np.corrcoef(h[on], r[on])[0, 1])
         held = h > 0.05  # relative error only where the human finger carries force
         rel = float(np.abs(r[held] - h[held]).sum() / h[held].sum()) if held.sum() > 2 else None
-        per[f] = {"correlation": corr, "relative_magnitude_error": rel}
+        per[f] = {
+            "correlation": _corr(h[on], r[on]) if on.sum() > 2 else None,
+            "profile_correlation": _corr(h, r) if on.sum() > 2 else None,
+            "relative_magnitude_error": rel,
+        }
     human_total = human.contacts.finger_totals()[:, : len(FORCE_GROUPS)].sum(axis=1)
     robot_total = sim.finger_force_world.sum(axis=1)
     touch = np.linalg.norm(human_total, axis=1) > 0.05
@@ -170,9 +180,13 @@ def force_metrics(robot, sim, human, retargeter) -> dict:
     need = np.linalg.norm(robot.human_force.sum(axis=1), axis=1)
     ok = robot.wrench_shortfall <= np.maximum(0.1 * need, 0.05)
     corrs = [v["correlation"] for v in per.values() if v["correlation"] is not None]
+    profile = [
+        v["profile_correlation"] for v in per.values() if v["profile_correlation"] is not None
+    ]
     return {
         "force_per_finger": per,
         "force_correlation_mean": float(np.mean(corrs)) if corrs else None,
+        "force_profile_correlation_mean": float(np.mean(profile)) if profile else None,
         "object_force_error_mean_n": float(werr.mean()) if werr.size else None,
         "object_force_error_contact_frames_mean_n": float(werr_all.mean())
         if werr_all.size
@@ -181,6 +195,10 @@ def force_metrics(robot, sim, human, retargeter) -> dict:
         "contact_recall": float((hc & rc).sum() / max(hc.sum(), 1)),
         "wrench_feasible_fraction": float(ok[touch].mean()) if touch.any() else None,
     }
+
+
+def _num(x: float | None) -> str:
+    return "–" if x is None else f"{x:.2f}"
 
 
 def _atomic_write_text(path: Path, text: str) -> None:
@@ -347,8 +365,9 @@ def _print_summary(m: dict, out_dir: Path) -> None:
     if m.get("force_correlation_mean") is not None:
         t.add_row(
             "force matching",
-            f"correlation {m['force_correlation_mean']:.2f}, object force error "
-            f"{m['object_force_error_mean_n']:.2f} N, wrench feasible "
+            f"correlation {_num(m['force_profile_correlation_mean'])} (whole clip) / "
+            f"{_num(m['force_correlation_mean'])} (contact frames), object force error "
+            f"{_num(m['object_force_error_mean_n'])} N, wrench feasible "
             f"{100 * m['wrench_feasible_fraction']:.0f} % of contact frames",
         )
     if "refine" in m:

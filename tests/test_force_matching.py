@@ -216,7 +216,8 @@ def test_cli_run_forces_reports_force_preservation(human_with_forces, tmp_path):
     assert rc == 0
     m = json.loads((out / "metrics.json").read_text())
     assert m["forces"] and m["human_force_pipeline"] is None  # forces came with the dataset
-    for key in ("force_correlation_mean", "object_force_error_mean_n", "contact_precision",
+    for key in ("force_correlation_mean", "force_profile_correlation_mean",
+                "object_force_error_mean_n", "contact_precision",
                 "contact_recall", "wrench_feasible_fraction"):  # fmt: skip
         assert m[key] is not None and np.isfinite(m[key])
     assert set(m["force_per_finger"]) == {"thumb", "index", "middle", "ring"}
