@@ -21,6 +21,8 @@ Measured per run:
   ``retarget.baselines.measure_trajectory`` (the definitions ``RobotTrajectory`` uses).
 * **penetration** — deepest hand–object penetration of the kinematic solution [mm]
   (``CollisionLimit.distances`` on the retargeting scene, object at its human pose).
+* **self pen** — deepest penetration between collision geoms of different hand parts (finger vs
+  finger or palm; ``HandModel.self_collision_pairs``) of the kinematic solution [mm].
 * **contact err** — mean over human fingertip contacts of the distance from the robot finger's
   surface point nearest the object to the human contact point (``RobotTrajectory.contact_err``).
 * **strict / loose success** — ``Resimulator`` (robot actuators track the joint trajectory,
@@ -183,6 +185,11 @@ def aggregate(rows: list[dict]) -> dict:
             ),
             "penetration_max_m": float(pens.max()) if ok else None,
             "penetration_mean_of_max_m": float(pens.mean()) if ok else None,
+            "self_penetration_max_m": max(
+                (r["self_penetration_max_m"] for r in ok
+                 if r.get("self_penetration_max_m") is not None),
+                default=None,
+            ),
             "contact_err_mean_m": (
                 float(np.sum(contact_v * contact_w) / contact_w.sum()) if contact_w.sum() else None
             ),
@@ -251,11 +258,11 @@ def metrics_table(title: str, agg: dict):
     t = Table(
         title=title,
         caption=f"{OURS}: re-simulated on q_command (grip squeeze); {OURS_Q}: on q. "
-        "Kinematic columns of both: q. pen: hand–object; table pen: hand below the "
-        "re-simulation's table (diagnostic).",
+        "Kinematic columns of both: q. pen: hand–object; self pen: finger–finger/palm; table "
+        "pen: hand below the re-simulation's table (diagnostic).",
     )
-    for col in ("method", "runs", "ms/frame", "kp err mm", "pen max mm", "contact err mm",
-                "strict %", "loose %", "table pen mm"):  # fmt: skip
+    for col in ("method", "runs", "ms/frame", "kp err mm", "pen max mm", "self pen mm",
+                "contact err mm", "strict %", "loose %", "table pen mm"):  # fmt: skip
         t.add_column(col, justify="left" if col == "method" else "right")
     for method in METHODS:
         a = agg.get(method)
@@ -267,6 +274,7 @@ def metrics_table(title: str, agg: dict):
             "–" if a["ms_per_frame"] is None else f"{a['ms_per_frame']:.3f}",
             _mm(a["keypoint_err_mean_m"]),
             _mm(a["penetration_max_m"]),
+            _mm(a.get("self_penetration_max_m")),
             _mm(a["contact_err_mean_m"]),
             _pct(a["success_rate"]),
             _pct(a["success_loose_rate"]),

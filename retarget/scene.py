@@ -42,9 +42,16 @@ class Scene:
         self.data.mocap_quat[mid] = aa_to_quat_wxyz(np.asarray(rot_aa, dtype=np.float64))
 
 
-def build_retarget_scene(hand, geometry=None, table: bool = True) -> Scene:
-    """Hand (floating wrist) + the object as a mocap body (+ the table), for the kinematic QP."""
-    spec = hand.build_spec()
+def build_retarget_scene(
+    hand, geometry=None, table: bool = True, self_collision: bool = False
+) -> Scene:
+    """Hand (floating wrist) + the object as a mocap body (+ the table), for the kinematic QP.
+
+    ``self_collision``: build the hand's self-collision variant (``HandModel.build_spec``), so
+    that the model's contact filters (``contype``/``conaffinity``, excluded body pairs) describe
+    the hand–hand pairs the solver keeps apart; the scene is kinematic either way.
+    """
+    spec = hand.build_spec(self_collision=self_collision)
     if geometry is not None:
         add_object(spec, geometry, mocap=True)
         if table:

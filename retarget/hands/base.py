@@ -611,6 +611,52 @@ class HandModel:
         parts["palm"] = [m.body(b).name for b in range(1, m.nbody) if m.body(b).name not in owned]
         return parts
 
+    def self_collision_pairs(self) -> list[tuple[str, str]]:
+        """Collision geom pairs (names) of different hand parts that must not interpenetrate.
+
+        A pair's geoms belong to different parts of :meth:`hand_parts` (finger vs finger, or
+        finger vs palm), and MuJoCo's own filters of the self-collision variant
+        (``build_spec(self_collision=True)``) would let them touch: not on one weld body or on a
+        weld parent and child, and not in an excluded body pair (the variant excludes the body
+        pairs touching at the open posture, e.g. palm vs finger bases). Pairs that still touch
+        at the open posture (signed distance ≤ 0, "by construction") are left out too. Geom
+        names are those of :meth:`build_spec`, which the retargeting scene shares. Cached.
+        """
+        pairs = self._cache.get("self_collision_pairs")
+        if pairs is not None:
+            return list(pairs)
+        import mujoco
+
+        m = self.build_spec(self_collision=True).compile()
+        d = mujoco.MjData(m)
+        d.qpos[:] = self.default_qpos(m)
+        mujoco.mj_kinematics(m, d)
+        part_of = {m.body(b).id: p for p, bodies in self.hand_parts(m).items() for b in bodies}
+        geoms = [
+            g
+            for g in range(m.ngeom)
+            if (m.geom_contype[g] or m.geom_conaffinity[g]) and m.geom_bodyid[g] in part_of
+        ]
+        excluded = {(int(s) >> 16, int(s) & 0xFFFF) for s in m.exclude_signature}
+        weld = m.body_weldid
+        fromto = np.zeros(6)
+        pairs = []
+        for i, a in enumerate(geoms):
+            for b in geoms[i + 1 :]:
+                ba, bb = int(m.geom_bodyid[a]), int(m.geom_bodyid[b])
+                if part_of[ba] == part_of[bb]:
+                    continue
+                wa, wb = int(weld[ba]), int(weld[bb])
+                if wa == wb or weld[m.body_parentid[wa]] == wb or weld[m.body_parentid[wb]] == wa:
+                    continue  # MuJoCo's parent-child filter (on weld bodies)
+                if any((min(x, y), max(x, y)) in excluded for x, y in ((ba, bb), (wa, wb))):
+                    continue
+                if mujoco.mj_geomDistance(m, d, a, b, 0.01, fromto) <= 0.0:
+                    continue  # touching at the open posture
+                pairs.append((m.geom(a).name, m.geom(b).name))
+        self._cache["self_collision_pairs"] = pairs
+        return list(pairs)
+
     @property
     def scale(self) -> float:
         """Robot/human hand size ratio (dimensionless).

@@ -1,8 +1,15 @@
 """QP limits: joint and velocity bounds, couplings, collision avoidance."""
 
 from retarget.limits.base import Limit
-from retarget.limits.collision import CollisionLimit
+from retarget.limits.collision import CollisionLimit, ContactSweep
 from retarget.limits.coupling import CouplingLimit
 from retarget.limits.joints import JointLimit, VelocityLimit
 
-__all__ = ["CollisionLimit", "CouplingLimit", "JointLimit", "Limit", "VelocityLimit"]
+__all__ = [
+    "CollisionLimit",
+    "ContactSweep",
+    "CouplingLimit",
+    "JointLimit",
+    "Limit",
+    "VelocityLimit",
+]

@@ -6,17 +6,199 @@ For each geom pair closer than ``distmax``, ``mj_geomDistance`` gives the signed
 ``−nᵀ(J₁ − J₂)Δq`` to first order, so ``d − nᵀ(J₁ − J₂)Δq ≥ −margin`` becomes the row
 ``nᵀ(J₁ − J₂) Δq ≤ d + margin``. ``J₂`` is zero for the object (it is kinematic in the
 retargeting scene), and the other hand body's point Jacobian for self-collision pairs.
+
+Two ways to find the pairs within ``distmax``, with the same result:
+
+* per pair (default): a broad phase drops the pairs whose bounding spheres (MuJoCo's
+  ``geom_rbound`` about ``geom_xpos``; a plane's half-space) are farther apart than
+  ``distmax``, all at once; the survivors go through ``mj_geomDistance`` one by one;
+* one sweep (:class:`ContactSweep`): ``mj_collision`` finds every contact within the model's
+  geom margins in C, once per configuration, shared by several limits (hand–object and self
+  collision) and the metrics. For pairs with a sphere, capsule or plane, ``mj_geomDistance`` is
+  the same narrow phase (the pair's collision function run with ``distmax`` as margin, keeping
+  its closest contact), so the sweep keeps each pair's closest contact; it needs those pairs to
+  pass MuJoCo's contact filters and margins of at least ``distmax``, which
+  :class:`CollisionLimit` checks. Box–box and mesh pairs are not the same (``mj_collision``'s
+  multi-contact routines report depths up to millimetres off the Euclidean distance that
+  ``mj_geomDistance`` computes), so they keep the per-pair path.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass, fields
 
 import mujoco
 import numpy as np
 
+from retarget.errors import RetargetError
 from retarget.limits.base import Limit
 from retarget.state import RobotState
+
+
+@dataclass
+class PairDistances:
+    """The pairs within ``distmax`` at one configuration (arrays over those pairs)."""
+
+    index: np.ndarray
+    """(k,) indices into the limit's ``pairs``."""
+    distance: np.ndarray
+    """(k,) signed distances [m] (negative: penetration)."""
+    p_a: np.ndarray
+    """(k, 3) nearest point on ``geom_a`` [m, world]."""
+    p_b: np.ndarray
+    """(k, 3) nearest point on ``geom_b`` [m, world]."""
+    normal: np.ndarray
+    """(k, 3) unit normal from ``geom_a`` to ``geom_b`` (the distance grows along it); NaN where
+    the nearest points coincide (touching exactly) and the query has no other direction."""
+
+
+_FIELDS = [f.name for f in fields(PairDistances)]
+
+
+def _normals(distance: np.ndarray, p_a: np.ndarray, p_b: np.ndarray) -> np.ndarray:
+    """Unit normals ``a → b`` from nearest points: ``(p_b − p_a) / d`` normalised (NaN if d = 0)."""
+    v = (p_b - p_a) * np.where(distance >= 0, 1.0, -1.0)[:, None]
+    norm = np.linalg.norm(v, axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(norm > 1e-9, v / norm, np.nan)
+
+
+# Pairs with one of these geoms get identical answers from mj_collision and mj_geomDistance.
+_SWEEP_TYPES = {
+    int(mujoco.mjtGeom.mjGEOM_PLANE),
+    int(mujoco.mjtGeom.mjGEOM_SPHERE),
+    int(mujoco.mjtGeom.mjGEOM_CAPSULE),
+}
+
+
+class ContactSweep:
+    """``mj_collision`` on the scene, once per configuration (hand ``q`` and mocap poses).
+
+    Args:
+        model, data: the scene; the geom (and explicit pair) margins set the query distance, so
+            give the scene margins of at least the largest ``distmax`` of the limits using it
+            (:meth:`set_margins`). The scene must be kinematic only: margins change contacts.
+        hand_nq: number of hand joints (the first ``hand_nq`` entries of ``qpos``).
+    """
+
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, hand_nq: int):
+        if model.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CONTACT:
+            raise RetargetError("ContactSweep needs contacts enabled (mjDSBL_CONTACT is set)")
+        self.model, self.data, self.hand_nq = model, data, hand_nq
+        self._q: np.ndarray | None = None
+        self._mocap = np.zeros((model.nmocap, 7))
+        # Registered pairs (all limits on this sweep): (geom, geom) → registered pair index.
+        self._lut = np.full(model.ngeom * model.ngeom, -1, dtype=int)
+        self._ga = np.zeros(0, int)
+        # Per registered pair with a contact this configuration (closest contact only):
+        self.pair = np.zeros(0, int)
+        """(k,) registered pair indices, sorted."""
+        self.dist = np.zeros(0)
+        """(k,) signed distances [m]."""
+        self.p_a, self.p_b, self.normal = np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
+        """(k, 3) nearest points on the pair's first and second geom, unit normal first → second."""
+
+    def register(self, pairs: Sequence[tuple[int, int]]) -> int:
+        """Add pairs (hand geom first); returns the index of the first in the sweep's output."""
+        ng = self.model.ngeom
+        ga = np.array([a for a, _ in pairs], dtype=int)
+        gb = np.array([b for _, b in pairs], dtype=int)
+        if (self._lut[ga * ng + gb] >= 0).any():
+            raise RetargetError("a collision pair is registered twice on one contact sweep")
+        offset = self._ga.size
+        self._lut[ga * ng + gb] = offset + np.arange(ga.size)
+        self._lut[gb * ng + ga] = offset + np.arange(ga.size)
+        self._ga = np.concatenate([self._ga, ga])
+        self._q = None
+        return offset
+
+    def set_margins(self, geoms: Sequence[int], margin: float) -> None:
+        """Query distance [m] of ``geoms``: a pair is reported up to the larger of its two geom
+        margins (explicit ``<pair>``s get the same); gaps are set to 0, and the midphase is off.
+        """
+        m = self.model
+        # The BVH midphase prunes body pairs without the margins (pairs within them go missing).
+        m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_MIDPHASE
+        m.geom_margin[list(geoms)] = margin
+        m.geom_gap[list(geoms)] = 0.0
+        if m.npair:
+            m.pair_margin[:] = np.maximum(m.geom_margin[m.pair_geom1], m.geom_margin[m.pair_geom2])
+            m.pair_gap[:] = 0.0
+        self._q = None
+
+    def update(self, q: np.ndarray) -> None:
+        """Contacts at hand configuration ``q`` (and the current mocap poses); cached."""
+        d = self.data
+        mocap = np.concatenate([d.mocap_pos, d.mocap_quat], axis=1) if self.model.nmocap else None
+        if (
+            self._q is not None
+            and np.array_equal(q, self._q)
+            and (mocap is None or np.array_equal(mocap, self._mocap))
+        ):
+            return
+        d.qpos[: self.hand_nq] = q
+        mujoco.mj_kinematics(self.model, d)
+        mujoco.mj_collision(self.model, d)
+        self._q = np.array(q, dtype=np.float64)
+        if mocap is not None:
+            self._mocap = mocap
+        c = d.contact
+        geom = np.asarray(c.geom).reshape(-1, 2)
+        pair = self._lut[geom[:, 0] * self.model.ngeom + geom[:, 1]]
+        sel = np.flatnonzero(pair >= 0)
+        dist = np.asarray(c.dist).reshape(-1)
+        # The closest contact of each pair (mj_geomDistance's answer).
+        order = sel[np.lexsort((dist[sel], pair[sel]))]
+        first = np.ones(order.size, bool)
+        first[1:] = pair[order][1:] != pair[order][:-1]
+        k = order[first]
+        self.pair, self.dist = pair[k], dist[k]
+        # Surface points: the contact position ∓ d/2 along its normal (geom[0] → geom[1]);
+        # swapped where the contact lists the pair's geoms the other way round.
+        n = np.asarray(c.frame).reshape(-1, 9)[k, :3]
+        pos = np.asarray(c.pos).reshape(-1, 3)[k]
+        half = 0.5 * self.dist[:, None] * n
+        sign = np.where(geom[k, 0] == self._ga[self.pair], 1.0, -1.0)[:, None]
+        self.normal = sign * n
+        self.p_a = pos - sign * half
+        self.p_b = pos + sign * half
+
+    def invalidate(self) -> None:
+        """Forget the cached contacts (after changing the scene other than ``q``/mocap)."""
+        self._q = None
+
+    def query_distance(self, ga: int, gb: int) -> float:
+        """The distance [m] up to which ``mj_collision`` reports the pair (its margin), or
+        ``-inf`` when its filters skip the pair: contype/conaffinity, one weld body or weld
+        parent and child, an excluded body pair (explicit ``<pair>``s are always seen)."""
+        m = self.model
+        for p in range(m.npair):
+            if {int(m.pair_geom1[p]), int(m.pair_geom2[p])} == {ga, gb}:
+                return float(m.pair_margin[p] - m.pair_gap[p])
+        margin = float(
+            max(m.geom_margin[ga], m.geom_margin[gb]) - max(m.geom_gap[ga], m.geom_gap[gb])
+        )
+        if not (
+            m.geom_contype[ga] & m.geom_conaffinity[gb]
+            or m.geom_contype[gb] & m.geom_conaffinity[ga]
+        ):
+            return -np.inf
+        ba, bb = int(m.geom_bodyid[ga]), int(m.geom_bodyid[gb])
+        w = m.body_weldid
+        wa, wb = int(w[ba]), int(w[bb])
+        if wa == wb:
+            return -np.inf
+        filter_parent = not (m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_FILTERPARENT)
+        if (
+            filter_parent
+            and wa
+            and wb
+            and (w[m.body_parentid[wa]] == wb or w[m.body_parentid[wb]] == wa)
+        ):
+            return -np.inf
+        excluded = {int(x) for x in m.exclude_signature}
+        return -np.inf if ((min(ba, bb) << 16) + max(ba, bb)) in excluded else margin
 
 
 class CollisionLimit(Limit):
@@ -25,10 +207,20 @@ class CollisionLimit(Limit):
     Args:
         model, data: the MuJoCo scene (hand + object); ``data.qpos[:nq_hand]`` is synchronised
             with the solver's ``q`` and the object pose is set by the caller (mocap body).
-        pairs: ``(geom_a, geom_b)`` ids; ``geom_a`` must belong to the hand.
+        pairs: ``(geom_a, geom_b)`` ids; ``geom_a`` must belong to the hand (and ``geom_b`` too
+            with ``self_collision``).
         hand_nq: number of hand joints (the first ``hand_nq`` entries of ``qpos``).
         margin: allowed penetration [m] (e.g. 0.002).
         distmax: pairs farther than this [m] are ignored this iterate.
+        self_collision: ``geom_b`` moves with the hand too (``J = J_a − J_b``).
+        sweep: find the pairs with a sphere, capsule or plane from this shared ``mj_collision``
+            sweep instead of one ``mj_geomDistance`` per pair (same result; see the module
+            docstring); the other pairs keep the per-pair path.
+        max_recovery: how far [m] a pair already deeper than ``margin`` is asked to back out
+            in one step (the row's right side is ``max(d + margin, −max_recovery)``); ``None``:
+            all the way at once. A cap keeps the QP feasible when a large step (e.g. the first
+            frame's, from the open posture) has pushed two fingers deep into each other and the
+            joint ranges forbid undoing it in one step; the rest is recovered over later steps.
     """
 
     name = "collision"
@@ -42,53 +234,168 @@ class CollisionLimit(Limit):
         margin: float = 0.0,
         distmax: float = 0.02,
         self_collision: bool = False,
+        max_recovery: float | None = None,
+        sweep: ContactSweep | None = None,
     ):
+        if not (np.isfinite(margin) and margin >= 0):
+            raise RetargetError(f"collision margin must be finite and >= 0, got {margin}")
+        if not (np.isfinite(distmax) and distmax > 0):
+            raise RetargetError(f"collision distmax must be finite and > 0, got {distmax}")
         self.model, self.data = model, data
-        self.pairs = list(pairs)
+        self.pairs = [(int(a), int(b)) for a, b in pairs]
+        for a, b in self.pairs:
+            if not (0 <= a < model.ngeom and 0 <= b < model.ngeom):
+                raise RetargetError(f"collision pair ({a}, {b}): geom ids must be < {model.ngeom}")
         self.hand_nq = hand_nq
         self.margin = margin
         self.distmax = distmax
         self.self_collision = self_collision
+        if max_recovery is not None and not (np.isfinite(max_recovery) and max_recovery >= 0):
+            raise RetargetError(f"max_recovery must be finite and >= 0, got {max_recovery}")
+        self.max_recovery = max_recovery
         self.last_min_distance = np.inf
         self._body_names = [
             mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(model.nbody)
         ]
+        ga = np.array([a for a, _ in self.pairs], dtype=int)
+        gb = np.array([b for _, b in self.pairs], dtype=int)
+        self._ga, self._gb = ga, gb
+        self._ga_list, self._gb_list = ga.tolist(), gb.tolist()
+        plane = int(mujoco.mjtGeom.mjGEOM_PLANE)
+        if np.any(model.geom_type[ga] == plane):
+            raise RetargetError("collision pairs: geom_a must be a hand geom, not a plane")
+        swept = np.zeros(len(self.pairs), bool)
+        if sweep is not None:
+            t = model.geom_type
+            swept = np.array([t[a] in _SWEEP_TYPES or t[b] in _SWEEP_TYPES for a, b in self.pairs])
+        self._swept = np.flatnonzero(swept)
+        b_plane = (model.geom_type[gb] == plane) & ~swept
+        # Sphere pairs: bounding spheres about geom_xpos; centre distance beyond the radii's sum
+        # plus distmax cannot be within distmax.
+        self._sph = np.flatnonzero(~b_plane & ~swept)
+        self._sph_a, self._sph_b = ga[self._sph], gb[self._sph]
+        reach = model.geom_rbound[self._sph_a] + model.geom_rbound[self._sph_b] + distmax
+        self._sph_reach2 = reach**2
+        # Plane pairs (geom_b a plane, e.g. the table): the hand geom's bounding sphere against
+        # the plane's half-space.
+        self._pln = np.flatnonzero(b_plane)
+        self._pln_a, self._pln_b = ga[self._pln], gb[self._pln]
+        self._pln_reach = model.geom_rbound[self._pln_a] + distmax
+        self._bodies_a = np.array([self._body_names[b] for b in model.geom_bodyid[ga]], object)
+        self._bodies_b = np.array([self._body_names[b] for b in model.geom_bodyid[gb]], object)
+        self._fromto = np.zeros(6)
+        self.sweep = sweep
+        if sweep is not None:
+            if sweep.model is not model or sweep.data is not data:
+                raise RetargetError("the contact sweep must run on the limit's own model and data")
+            for a, b in (self.pairs[i] for i in self._swept):
+                reach = sweep.query_distance(a, b)
+                names = f"({model.geom(a).name}, {model.geom(b).name})"
+                if reach == -np.inf:
+                    raise RetargetError(
+                        f"collision pair {names} is filtered out of mj_collision (contype/"
+                        "conaffinity, parent/child or excluded): the sweep would never see it"
+                    )
+                if reach < distmax:
+                    raise RetargetError(
+                        f"collision pair {names}: mj_collision margin {reach} < distmax "
+                        f"{distmax}; ContactSweep.set_margins first"
+                    )
+            self._offset = sweep.register([self.pairs[i] for i in self._swept])
+
+    def candidates(self) -> np.ndarray:
+        """Indices of the pairs whose bounding volumes are within ``distmax`` (broad phase).
+
+        Uses the geom poses already in ``data`` (call after ``mj_kinematics``).
+        """
+        xpos = self.data.geom_xpos
+        diff = xpos[self._sph_a] - xpos[self._sph_b]  # (P, 3)
+        out = self._sph[np.einsum("ij,ij->i", diff, diff) < self._sph_reach2]
+        if self._pln.size:
+            # Height of the hand geom's centre above the plane (normal: the plane frame's z).
+            n = self.data.geom_xmat[self._pln_b][:, [2, 5, 8]]
+            h = np.einsum("ij,ij->i", xpos[self._pln_a] - xpos[self._pln_b], n)
+            out = np.concatenate([out, self._pln[h < self._pln_reach]])
+        return out
+
+    def query(self, q: np.ndarray) -> PairDistances:
+        """Signed distances and nearest points of every pair within ``distmax`` at ``q``."""
+        if self.sweep is None:
+            return self._query_direct(q)
+        swept = self._query_sweep(q)  # (leaves data at q)
+        if self._swept.size == len(self.pairs):
+            return swept
+        direct = self._query_direct(q, kinematics=False)
+        return PairDistances(
+            *(np.concatenate([getattr(swept, f), getattr(direct, f)]) for f in _FIELDS)
+        )
+
+    def _query_direct(self, q: np.ndarray, kinematics: bool = True) -> PairDistances:
+        """The per-pair path: sphere broad phase, then ``mj_geomDistance`` per candidate."""
+        m, d = self.model, self.data
+        if kinematics:
+            d.qpos[: self.hand_nq] = q
+            mujoco.mj_kinematics(m, d)
+        idx = self.candidates()
+        dist = np.empty(idx.size)
+        pts = np.empty((idx.size, 6))
+        fromto, distmax = self._fromto, self.distmax
+        ga, gb = self._ga_list, self._gb_list
+        keep = np.zeros(idx.size, bool)
+        for k, i in enumerate(idx.tolist()):
+            r = mujoco.mj_geomDistance(m, d, ga[i], gb[i], distmax, fromto)
+            if r < distmax:
+                keep[k] = True
+                dist[k] = r
+                pts[k] = fromto
+        p_a, p_b = pts[keep, :3], pts[keep, 3:]
+        return PairDistances(idx[keep], dist[keep], p_a, p_b, _normals(dist[keep], p_a, p_b))
+
+    def _query_sweep(self, q: np.ndarray) -> PairDistances:
+        sw = self.sweep
+        sw.update(q)
+        i = sw.pair - self._offset
+        k = np.flatnonzero((i >= 0) & (i < self._swept.size) & (sw.dist < self.distmax))
+        return PairDistances(self._swept[i[k]], sw.dist[k], sw.p_a[k], sw.p_b[k], sw.normal[k])
 
     def distances(self, q: np.ndarray) -> list[tuple[int, int, float, np.ndarray, np.ndarray]]:
         """``(geom_a, geom_b, d, p_a, p_b)`` for every pair within ``distmax`` at ``q``."""
-        m, d = self.model, self.data
-        d.qpos[: self.hand_nq] = q
-        mujoco.mj_kinematics(m, d)
-        out = []
-        fromto = np.zeros(6)
-        for ga, gb in self.pairs:
-            dist = mujoco.mj_geomDistance(m, d, ga, gb, self.distmax, fromto)
-            if dist < self.distmax:
-                out.append((ga, gb, float(dist), fromto[:3].copy(), fromto[3:].copy()))
-        return out
+        r = self.query(q)
+        return [
+            (self.pairs[i][0], self.pairs[i][1], float(dd), pa, pb)
+            for i, dd, pa, pb in zip(r.index.tolist(), r.distance, r.p_a, r.p_b, strict=True)
+        ]
+
+    def min_distance(self, q: np.ndarray) -> float:
+        """Smallest signed distance [m] over the pairs within ``distmax`` at ``q`` (else inf)."""
+        r = self.query(q)
+        return float(r.distance.min()) if r.distance.size else np.inf
 
     def inequalities(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
-        rows, rhs = [], []
-        self.last_min_distance = np.inf
-        for ga, gb, dist, pa, pb in self.distances(state.q):
-            self.last_min_distance = min(self.last_min_distance, dist)
-            v = pb - pa
-            norm = np.linalg.norm(v)
-            if norm > 1e-9:
-                n = v / norm * (1.0 if dist >= 0 else -1.0)
-            else:
-                # Touching exactly: the nearest points coincide. Use the direction from the hand
-                # geom's centre to the contact point instead (exact for spheres and capsules).
-                c = pb - self.data.geom_xpos[ga]
-                if np.linalg.norm(c) < 1e-12:
-                    continue
-                n = c / np.linalg.norm(c)
-            Ja = state.kin.point_jacobian(self._body_names[self.model.geom_bodyid[ga]], pa)
-            J = Ja
-            if self.self_collision:
-                J = Ja - state.kin.point_jacobian(self._body_names[self.model.geom_bodyid[gb]], pb)
-            rows.append(n @ J)
-            rhs.append(dist + self.margin)
-        if not rows:
+        r = self.query(state.q)
+        self.last_min_distance = float(r.distance.min()) if r.distance.size else np.inf
+        if not r.distance.size:
             return np.zeros((0, state.nv)), np.zeros(0)
-        return np.array(rows), np.array(rhs)
+        n = r.normal
+        ok = np.isfinite(n[:, 0])
+        if not ok.all():
+            # Touching exactly: the nearest points coincide. Use the direction from the hand
+            # geom's centre to the contact point instead (exact for spheres and capsules).
+            c = r.p_b[~ok] - self.data.geom_xpos[self._ga[r.index[~ok]]]
+            cn = np.linalg.norm(c, axis=1)
+            n = n.copy()
+            n[~ok] = c / np.maximum(cn, 1e-12)[:, None]
+            ok = ok.copy()
+            ok[~ok] = cn >= 1e-12
+        k = r.index.size
+        if self.self_collision:  # both points in one call: J = J_a − J_b
+            bodies = (*self._bodies_a[r.index], *self._bodies_b[r.index])
+            J = state.kin.point_jacobians(bodies, np.concatenate([r.p_a, r.p_b]))
+            J = J[:k] - J[k:]
+        else:
+            J = state.kin.point_jacobians(tuple(self._bodies_a[r.index]), r.p_a)  # (k, 3, nv)
+        G = np.einsum("ki,kij->kj", n, J)
+        h = r.distance + self.margin
+        if self.max_recovery is not None:
+            h = np.maximum(h, -self.max_recovery)
+        return G[ok], h[ok]

@@ -1,0 +1,328 @@
+"""Self-collision and hand–object rows on real hands: pair selection, Jacobians against finite
+differences, fingers commanded into each other, and the batched kinematics the solver uses."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from dexcanvas_core.demos.geometry import object_geometry
+from dexcanvas_core.keypoints import MANO21
+from dexcanvas_core.rotations import matrix_to_aa
+from dexcanvas_core.trajectory import HandTrack, Trajectory
+from retarget.hands import available_hands, get_hand
+from retarget.hands.base import WRIST_SITE, wrist_qpos_from_mano
+from retarget.kinematics import MujocoKinematics, PinocchioKinematics
+from retarget.limits import CollisionLimit
+from retarget.retargeter import RetargetConfig, Retargeter
+from retarget.state import RobotState
+
+HANDS = ["shadow", "allegro"]
+
+
+@pytest.fixture(scope="module", params=HANDS)
+def rt(request) -> Retargeter:
+    return Retargeter(get_hand(request.param), object_geometry("cube2"))
+
+
+def _random_pose(rt: Retargeter, rng, spread=(0.0, 1.0)) -> np.ndarray:
+    q = rt.q_default.copy()
+    lo, hi = rt.lower, rt.upper
+    fin = np.isfinite(lo[6:]) & np.isfinite(hi[6:])
+    u = rng.uniform(*spread, fin.sum())
+    q[6:][fin] = lo[6:][fin] + u * (hi[6:] - lo[6:])[fin]
+    return _coupled(rt.scene.model, q)
+
+
+def _coupled(m, q):
+    q = q.copy()
+    for e in range(m.neq):
+        if m.eq_type[e] == mujoco.mjtEq.mjEQ_JOINT and m.eq_obj2id[e] >= 0:
+            c = m.eq_data[e]
+            x = q[m.jnt_qposadr[m.eq_obj2id[e]]]
+            q[m.jnt_qposadr[m.eq_obj1id[e]]] = c[0] + c[1] * x + c[2] * x**2 + c[3] * x**3
+    return q
+
+
+def _finger_pair_penetration(rt: Retargeter, q: np.ndarray) -> float:
+    """Deepest penetration [m] among the self pairs whose geoms are on two fingers (no palm)."""
+    hand_parts = rt.hand.hand_parts(rt.scene.model)
+    part = {rt.scene.model.body(b).id: p for p, bodies in hand_parts.items() for b in bodies}
+    m = rt.scene.model
+    deepest = 0.0
+    for ga, gb, d, _, _ in rt.self_distance_query.distances(q):
+        pa, pb = part[m.geom_bodyid[ga]], part[m.geom_bodyid[gb]]
+        if "palm" not in (pa, pb):
+            deepest = max(deepest, -d)
+    return deepest
+
+
+# ---------------------------------------------------------------------------- pair selection
+@pytest.mark.parametrize("name", available_hands())
+def test_self_collision_pairs_join_different_parts_only(name):
+    hand = get_hand(name)
+    m = hand.compile()
+    pairs = hand.self_collision_pairs()
+    assert pairs, f"{name}: no self-collision pairs"
+    part = {m.body(b).id: p for p, bodies in hand.hand_parts(m).items() for b in bodies}
+    d = mujoco.MjData(m)
+    d.qpos[:] = hand.default_qpos(m)
+    mujoco.mj_kinematics(m, d)
+    fromto = np.zeros(6)
+    for a, b in pairs:
+        ga, gb = m.geom(a).id, m.geom(b).id
+        ba, bb = m.geom_bodyid[ga], m.geom_bodyid[gb]
+        assert part[ba] != part[bb], (a, b)  # never two links of one finger
+        assert m.body_parentid[ba] != bb and m.body_parentid[bb] != ba, (a, b)
+        # Nothing that touches at the open posture (palm vs finger bases): the open hand is
+        # feasible, and its resting contacts are not constraints.
+        assert mujoco.mj_geomDistance(m, d, ga, gb, 0.05, fromto) > 0, (a, b)
+    # Every pair of fingers is covered somewhere (the gripper's two fingers included).
+    fingers = [f for f in hand.robot_fingers if f in hand.hand_parts(m)]
+    covered = {frozenset((part[m.geom(a).bodyid[0]], part[m.geom(b).bodyid[0]])) for a, b in pairs}
+    for i, f in enumerate(fingers):
+        for g in fingers[i + 1 :]:
+            assert frozenset((f, g)) in covered, (name, f, g)
+
+
+def test_config_rejects_bad_collision_settings():
+    from retarget.errors import RetargetError
+
+    with pytest.raises(RetargetError, match="self_collision_margin"):
+        RetargetConfig(self_collision_margin=-1e-3).validate()
+    with pytest.raises(RetargetError, match="self_collision_distmax"):
+        RetargetConfig(self_collision_distmax=0.0).validate()
+    with pytest.raises(RetargetError, match="step_tolerance"):
+        RetargetConfig(step_tolerance=float("nan")).validate()
+
+
+# ---------------------------------------------------------------- Jacobians vs finite differences
+SMOOTH = {int(mujoco.mjtGeom.mjGEOM_SPHERE), int(mujoco.mjtGeom.mjGEOM_CAPSULE),
+          int(mujoco.mjtGeom.mjGEOM_PLANE)}  # fmt: skip
+
+
+def _body_point(data, body: int, p_world: np.ndarray) -> np.ndarray:
+    """``p_world`` in ``body``'s frame (after ``mj_kinematics``)."""
+    return data.xmat[body].reshape(3, 3).T @ (p_world - data.xpos[body])
+
+
+def _check_rows(limit, kin, q, rng, errors: list, step=1e-6):
+    """Rows ``G Δq ≤ h`` at ``q`` against finite differences, two ways.
+
+    1. Exactly, against the model the row linearises: the pair's witness points held fixed to
+       their bodies (the object's to the world), ``Δd = n·(Δp_b − Δp_a) = −G δ``. This checks
+       the body, point, normal, sign and (self-collision) the ``J_a − J_b`` of every row.
+    2. Against the true signed distance change: recorded in ``errors`` (relative error, smooth
+       pair or not), since at edges and corners of boxes the distance is not differentiable.
+    """
+    m, d = limit.model, limit.data
+    kin.forward(q)
+    G, h = limit.inequalities(RobotState(q=q, kin=kin))
+    r = limit.query(q)
+    assert G.shape == (r.index.size, q.size) and h.shape == (r.index.size,)
+    np.testing.assert_allclose(h, r.distance + limit.margin, atol=1e-12)  # no recovery cap hit
+    v = r.p_b - r.p_a
+    n = v / np.linalg.norm(v, axis=1, keepdims=True) * np.where(r.distance >= 0, 1, -1)[:, None]
+    ga = [limit.pairs[i][0] for i in r.index]
+    gb = [limit.pairs[i][1] for i in r.index]
+    ba, bb = m.geom_bodyid[ga], m.geom_bodyid[gb]
+    la = [_body_point(d, b, p) for b, p in zip(ba, r.p_a, strict=True)]
+    lb = [_body_point(d, b, p) for b, p in zip(bb, r.p_b, strict=True)]
+    for _ in range(3):
+        delta = rng.normal(size=q.size)
+        delta *= step / np.abs(delta).max()
+        r2 = limit.query(q + delta)  # moves data to q + δ
+        predicted = -G @ delta
+        for row in range(len(ga)):
+            pa = d.xmat[ba[row]].reshape(3, 3) @ la[row] + d.xpos[ba[row]]
+            pb = d.xmat[bb[row]].reshape(3, 3) @ lb[row] + d.xpos[bb[row]]
+            fixed = n[row] @ ((pb - pa) - (r.p_b[row] - r.p_a[row]))
+            assert abs(fixed - predicted[row]) <= 1e-4 * abs(predicted[row]) + 1e-12, (
+                limit.pairs[r.index[row]], fixed, predicted[row])  # fmt: skip
+        after = dict(zip(r2.index.tolist(), r2.distance, strict=True))
+        for row, i in enumerate(r.index.tolist()):
+            if i in after and abs(predicted[row]) > 1e-9:
+                smooth = {m.geom_type[ga[row]], m.geom_type[gb[row]]} <= SMOOTH
+                rel = abs(after[i] - r.distance[row] - predicted[row]) / abs(predicted[row])
+                errors.append((smooth, rel))
+    return len(ga)
+
+
+def _assert_first_order(errors):
+    """The rows are the distance's derivative: for smooth pairs always, for pairs with a box
+    almost always (not where the nearest feature switches)."""
+    smooth = np.array([e for s, e in errors if s])
+    rough = np.array([e for s, e in errors if not s])
+    assert smooth.size + rough.size >= 20
+    if smooth.size:
+        assert smooth.max() < 0.02, smooth.max()
+    if rough.size:
+        assert np.median(rough) < 1e-3 and np.mean(rough < 0.02) > 0.9, np.sort(rough)[-5:]
+
+
+def test_self_collision_rows_match_finite_differences(rt):
+    rng = np.random.default_rng(0)
+    checked = penetrating = 0
+    errors = []
+    for _ in range(40):
+        q = _random_pose(rt, rng)
+        r = rt.self_collision.query(q)
+        if not r.index.size or (r.distance + rt.cfg.self_collision_margin < -1e-3).any():
+            continue  # (a capped recovery row is not the plain linearisation)
+        penetrating += int((r.distance < 0).any())
+        checked += _check_rows(rt.self_collision, rt.kin, q, rng, errors)
+    assert checked >= 20 and penetrating >= 1
+    _assert_first_order(errors)
+
+
+def test_object_collision_rows_match_finite_differences(rt, demo_cube):
+    traj = demo_cube
+    tg = rt.human_targets(traj)
+    rng = np.random.default_rng(1)
+    checked = 0
+    errors = []
+    for t in np.linspace(0, traj.num_frames - 1, 8).astype(int):
+        rt.scene.set_object_pose(traj.object.pos[t], traj.object.rot_aa[t])
+        q = _random_pose(rt, rng, (0.2, 0.6))
+        q[:6] = wrist_qpos_from_mano(tg["wrist_R"][t], tg["wrist_p"][t])
+        checked += _check_rows(rt.collision, rt.kin, q, rng, errors)
+    assert checked >= 10
+    _assert_first_order(errors)
+
+
+@pytest.fixture(scope="module")
+def demo_cube() -> Trajectory:
+    from dexcanvas_core.example import example_trajectories
+
+    traj = next(t for t in example_trajectories(seed=0) if t.scene == "cube2")
+    return traj.slice(100, 220)
+
+
+# ----------------------------------------------------------- fingers commanded into each other
+def _human_from_robot_poses(rt: Retargeter, Q: np.ndarray) -> Trajectory:
+    """A 'human' whose scaled keypoints are the robot's own sites along ``Q`` (T, nq)."""
+    T = Q.shape[0]
+    kp = np.zeros((T, 21, 3))
+    pos, rot = np.zeros((T, 3)), np.zeros((T, 3))
+    for t, q in enumerate(Q):
+        rt.kin.forward(q)
+        p_w = rt.kin.site_position(WRIST_SITE)
+        kp[t] = p_w
+        for name, site in zip(rt.kp_names, rt.kp_sites, strict=True):
+            kp[t, MANO21.index(name)] = p_w + (rt.kin.site_position(site) - p_w) / rt.scale
+        pos[t], rot[t] = p_w, matrix_to_aa(rt.kin.site_rotation(WRIST_SITE))
+    hand = HandTrack(
+        name="right", global_pos=pos, global_rot_aa=rot, hand_pose=np.zeros((T, 48)), joint_pos=kp
+    )
+    return Trajectory(
+        uuid="fingers-crossed", timestamp=np.arange(T) / 120.0, fps=120.0, hands=[hand], objects=[]
+    )
+
+
+@pytest.mark.parametrize("name", HANDS)
+def test_fingers_commanded_into_each_other_stay_apart(name):
+    """Keypoints that drive two fingers through each other: with the limit the fingers stop at
+    the margin, without it they follow the keypoints into each other."""
+    hand = get_hand(name)
+    cfg = RetargetConfig(w_posture=0.0, w_smooth=0.0)
+    on = Retargeter(hand, None, cfg)
+    off = Retargeter(
+        hand, None, RetargetConfig(w_posture=0.0, w_smooth=0.0, use_self_collision=False)
+    )
+    rng = np.random.default_rng(3)
+    # A reachable pose (joint ranges, couplings) with two fingers deep inside each other.
+    for _ in range(2000):
+        q_bad = _random_pose(on, rng)
+        if _finger_pair_penetration(on, q_bad) > 0.006:
+            break
+    else:
+        pytest.fail(f"{name}: no finger-through-finger pose found")
+    q0 = on.q_default.copy()
+    s = np.linspace(0.0, 1.0, 60)[:, None]
+    Q = np.concatenate([(1 - s) * q0 + s * q_bad, np.tile(q_bad, (20, 1))])
+    human = _human_from_robot_poses(on, Q)
+    out_on = on.retarget(human)
+    out_off = off.retarget(human)
+    margin = cfg.self_collision_margin
+    assert out_on.self_penetration_max_m <= margin + 5e-4, out_on.self_penetration_max_m
+    assert out_off.self_penetration_max_m > margin + 3e-3, out_off.self_penetration_max_m
+    # Without the limit the robot follows the keypoints (they come from its own poses).
+    assert out_off.keypoint_err[-1] < 2e-3
+    # The measured self distance is the limit's own query, frame by frame.
+    assert np.isfinite(out_on.self_min_distance).any()
+
+
+# ------------------------------------------------------------------------ batched kinematics
+def test_batched_site_and_point_jacobians_match_mujoco(rt):
+    m = rt.scene.model
+    pin_kin, mj_kin = PinocchioKinematics(m), MujocoKinematics(m, nq=rt.nq)
+    rng = np.random.default_rng(5)
+    sites = tuple(rt.kp_sites)
+    for _ in range(3):
+        q = _random_pose(rt, rng)
+        q[:6] = rng.uniform(-0.5, 0.5, 6)
+        pin_kin.forward(q)
+        mj_kin.forward(q)
+        np.testing.assert_allclose(pin_kin.site_positions(sites), mj_kin.site_positions(sites),
+                                   atol=1e-10)  # fmt: skip
+        np.testing.assert_allclose(pin_kin.site_jacobians(sites), mj_kin.site_jacobians(sites),
+                                   atol=1e-10)  # fmt: skip
+        # Pinocchio's own frame placements agree with the MuJoCo site poses it reports.
+        for s in sites:
+            np.testing.assert_allclose(
+                pin_kin.data.oMf[pin_kin.site_frames[s]].translation, pin_kin.site_position(s),
+                atol=1e-10,
+            )  # fmt: skip
+        bodies = tuple(m.body(b).name for b in rng.integers(2, m.nbody, 6))
+        pts = rng.normal(scale=0.1, size=(6, 3))
+        np.testing.assert_allclose(pin_kin.point_jacobians(bodies, pts),
+                                   mj_kin.point_jacobians(bodies, pts), atol=1e-10)  # fmt: skip
+
+
+# ------------------------------------------------------------------ one mj_collision sweep
+@pytest.mark.parametrize("name", ["shadow", "allegro", "svh"])
+def test_contact_sweep_matches_per_pair_distances(name, demo_cube):
+    """The shared mj_collision sweep (the retargeter's default) finds the same pairs, distances,
+    nearest points and normals as one mj_geomDistance per pair, for the hand–object and the
+    self-collision pairs (box–box and mesh pairs go per pair inside the sweep limit too)."""
+    rt = Retargeter(get_hand(name), object_geometry("cube2"))
+    m, d = rt.scene.model, rt.scene.data
+    traj = demo_cube
+    tg = rt.human_targets(traj)
+    rng = np.random.default_rng(7)
+    compared = 0
+    for swept in (rt.collision, rt.self_collision):
+        plain = CollisionLimit(m, d, swept.pairs, rt.nq, distmax=swept.distmax,
+                               self_collision=swept.self_collision)  # fmt: skip
+        for t in np.linspace(0, traj.num_frames - 1, 12).astype(int):
+            rt.scene.set_object_pose(traj.object.pos[t], traj.object.rot_aa[t])
+            q = _random_pose(rt, rng, (0.1, 0.7))
+            q[:6] = wrist_qpos_from_mano(tg["wrist_R"][t], tg["wrist_p"][t])
+            a, b = swept.query(q), plain.query(q)
+            oa, ob = np.argsort(a.index), np.argsort(b.index)
+            np.testing.assert_array_equal(a.index[oa], b.index[ob])
+            np.testing.assert_allclose(a.distance[oa], b.distance[ob], atol=1e-12)
+            np.testing.assert_allclose(a.p_a[oa], b.p_a[ob], atol=1e-12)
+            np.testing.assert_allclose(a.p_b[oa], b.p_b[ob], atol=1e-12)
+            ok = np.isfinite(b.normal[ob, 0])
+            np.testing.assert_allclose(a.normal[oa][ok], b.normal[ob][ok], atol=1e-9)
+            compared += a.index.size
+    assert compared > 50
+
+
+def test_contact_sweep_follows_the_object(demo_cube):
+    """Same q, object moved: the sweep must not reuse the previous pose's contacts."""
+    rt = Retargeter(get_hand("allegro"), object_geometry("cube2"))
+    tg = rt.human_targets(demo_cube)
+    t = int(np.flatnonzero(tg["contact_active"].any(axis=1))[0])
+    rt.scene.set_object_pose(demo_cube.object.pos[t], demo_cube.object.rot_aa[t])
+    q = rt.retarget(demo_cube).q[t]  # fingers on the cube
+    rt.scene.set_object_pose(demo_cube.object.pos[t], demo_cube.object.rot_aa[t])
+    near = rt.collision.min_distance(q)
+    assert near < 0.005
+    rt.scene.set_object_pose(demo_cube.object.pos[t] + [0.0, 0.0, 0.5], demo_cube.object.rot_aa[t])
+    far = rt.collision.min_distance(q)
+    plain = CollisionLimit(rt.scene.model, rt.scene.data, rt.collision.pairs, rt.nq,
+                           distmax=rt.collision.distmax)  # fmt: skip
+    assert far == plain.min_distance(q) and far != near  # (far: the table is nearest now)
