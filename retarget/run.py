@@ -6,7 +6,8 @@ users can call it too. It writes into ``out``:
 * ``robot_trajectory.npz`` — joint positions and servo commands (MuJoCo ``qpos`` order, names
   included), timestamps, fingertip positions, per-frame keypoint/contact errors and hand–object
   distances, simulated object pose, per-finger contact forces;
-* ``metrics.json`` — the numbers (success, object errors, keypoint error, penetration, speed).
+* ``metrics.json`` — the numbers (success, object errors, keypoint error, hand–object and
+  finger–finger penetration, speed).
 
 Both files are written atomically (temporary file, then rename).
 """
@@ -256,6 +257,7 @@ def run_retarget(cfg: RunConfig) -> dict:
         **sim.metrics(),
         "keypoint_err_mean_m": float(robot.keypoint_err.mean()),
         "penetration_max_m": kin_pen,
+        "self_penetration_max_m": robot.self_penetration_max_m,
         "sim_penetration_max_m": float(sim.penetration_max_m),
         "contact_err_mean_m": float(contact_err.mean()) if contact_err.size else None,
         "contact_frames": int(robot.contact_active.any(axis=1).sum()),
@@ -360,6 +362,7 @@ def _print_summary(m: dict, out_dir: Path) -> None:
         "penetration max (kinematic / sim)",
         f"{1000 * m['penetration_max_m']:.1f} / {1000 * m['sim_penetration_max_m']:.1f} mm",
     )
+    t.add_row("finger–finger penetration max", f"{1000 * m['self_penetration_max_m']:.1f} mm")
     forces = ", ".join(f"{k} {v:.2f}" for k, v in m["finger_force_mean_n"].items())
     t.add_row("mean contact force [N]", forces)
     if m.get("force_correlation_mean") is not None:

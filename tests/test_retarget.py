@@ -192,9 +192,11 @@ def test_cli_run_writes_outputs(small_dataset, tmp_path, capsys):
     m = json.loads((out / "metrics.json").read_text())
     for key in ("success", "object_pos_err_max_m", "object_pos_err_mean_m",
                 "object_rot_err_mean_rad", "keypoint_err_mean_m", "penetration_max_m",
-                "ms_per_frame"):  # fmt: skip
+                "self_penetration_max_m", "ms_per_frame"):  # fmt: skip
         assert key in m
+    assert 0.0 <= m["self_penetration_max_m"] < 2e-3
     z = np.load(out / "robot_trajectory.npz")
+    assert z["self_min_distance"].shape == (120,)
     assert z["q"].shape == (120, len(z["joint_names"]))
     assert z["finger_force_world"].shape == (120, 5, 3)
     assert not list(out.glob(".*tmp"))
