@@ -139,7 +139,14 @@ class ContactSweep:
             return
         d.qpos[: self.hand_nq] = q
         mujoco.mj_kinematics(self.model, d)
+        full = d.warning[mujoco.mjtWarning.mjWARN_CONTACTFULL].number
         mujoco.mj_collision(self.model, d)
+        if d.warning[mujoco.mjtWarning.mjWARN_CONTACTFULL].number != full:
+            # Dropped contacts would be pairs silently missing from the limits.
+            raise RetargetError(
+                f"mj_collision ran out of contact memory ({d.ncon} contacts within the margins); "
+                "give the scene a larger memory size or smaller collision distmax values"
+            )
         self._q = np.array(q, dtype=np.float64)
         if mocap is not None:
             self._mocap = mocap
