@@ -22,8 +22,9 @@ from dexcanvas_core.demos import (
     run_build,
     solve_grasp,
 )
+from dexcanvas_core.demos.checks import lift_grip_ratio
 from dexcanvas_core.demos.geometry import ObjectGeometry, Primitive
-from dexcanvas_core.demos.grasp import cached_grasp
+from dexcanvas_core.demos.grasp import GRIP_RATIO_MAX, HOLD_RATIO_MAX, cached_grasp
 from dexcanvas_core.demos.hand import DOF_HIGH, DOF_LOW, N_DOF, hand_model
 from dexcanvas_core.errors import UnknownNameError
 from dexcanvas_core.keypoints import MANO21
@@ -187,11 +188,79 @@ def test_grasp_optimisation_puts_pads_on_the_surface(pair):
     obj, kind = pair.split("/")
     g = solve_grasp(obj, kind, hand_model(1.0))
     required = np.array([c.required for c in g.contacts])
-    assert g.ok, g.reason
+    # (whether the contacts can lift the object is ``test_accepted_grasps_can_lift_…``'s)
+    assert "contact off" not in g.reason and "penetration" not in g.reason, g.reason
     assert np.all(np.abs(g.distance_m[required]) <= 1.5e-3)
     assert g.max_penetration_m <= 2e-3
     assert g.min_table_clearance_m >= -2e-3
     assert g.seconds < 10.0
+
+
+def _ring(n: int, tilt: float = 0.0) -> np.ndarray:
+    th = 2 * np.pi * np.arange(n) / n
+    return np.stack(
+        [np.cos(th) * np.cos(tilt), np.sin(th) * np.cos(tilt), np.full(n, np.sin(tilt))], 1
+    )
+
+
+def test_lift_grip_ratio_matches_friction_statics():
+    mu = 0.5
+    inner = mu  # the pyramid has an edge straight up the tangent plane: exact for lifting
+    # balanced horizontal contacts lift with friction alone: total squeeze = weight / μ
+    for n in (2, 3, 5):
+        assert lift_grip_ratio(_ring(n), mu=mu) == pytest.approx(1 / inner, rel=1e-6)
+    # a contact under the object carries the weight with no friction
+    assert lift_grip_ratio(np.array([[0.0, 0.0, -1.0]]), mu=mu) == pytest.approx(1.0, rel=1e-6)
+    # pads above the equator (normals tilted up by α) push the object down:
+    # each normal force N gives μN cos α − N sin α of lift
+    a = np.radians(10.0)
+    expected = 1 / (inner * np.cos(a) - np.sin(a))
+    assert lift_grip_ratio(_ring(3, a), mu=mu) == pytest.approx(expected, rel=1e-3)
+    # one contact, contacts on one side, or tilted beyond the cone cannot lift at all
+    assert lift_grip_ratio(np.array([[1.0, 0.0, 0.0]]), mu=mu) == np.inf
+    assert lift_grip_ratio(_ring(3, np.radians(30.0)), mu=mu) == np.inf
+    assert lift_grip_ratio(np.array([[1.0, 0, 0], [np.cos(2.0), np.sin(2.0), 0]]), mu=mu) == np.inf
+    # normals that do not oppose spend squeeze: a pinch 150° apart needs more than 180° apart
+    b = np.radians(150.0)
+    skew = lift_grip_ratio(np.array([[1.0, 0, 0], [np.cos(b), np.sin(b), 0]]), mu=mu)
+    assert 1 / inner < skew < np.inf
+    assert lift_grip_ratio(np.zeros((0, 3)), mu=mu) == np.inf
+
+
+def test_lift_grip_ratio_with_torques_charges_an_off_centre_pinch():
+    # a pinch across a bar, dx from the centre of mass: the hand's lift force acts dx from the
+    # weight, and only the pads' twist (≤ torsion × normal force each) keeps the bar level,
+    # so the squeeze must reach dx / torsion on top of the 1/μ that lifts it
+    mu, tors = 0.5, 0.0025
+    n = np.array([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0]])
+    for dx in (0.0, 0.01, 0.03):
+        p = np.array([[dx, 0.02, 0.0], [dx, -0.02, 0.0]])
+        got = lift_grip_ratio(n, p, mu=mu, torsion_m=tors)
+        assert got == pytest.approx(1 / mu + dx / tors, rel=1e-6)
+        assert lift_grip_ratio(n, mu=mu) == pytest.approx(1 / mu)  # forces alone: no charge
+    # pads not in line (a squeeze that twists the bar about the vertical) cannot be balanced
+    # by point contacts without torsion
+    p = np.array([[0.01, 0.02, 0.0], [-0.01, -0.02, 0.0]])
+    assert lift_grip_ratio(n, p, mu=mu, torsion_m=0.0) == np.inf
+    assert lift_grip_ratio(n, p, mu=mu, torsion_m=tors) > 1 / mu
+    # a tripod around the centre of mass balances without any twist
+    ring = _ring(3)
+    assert lift_grip_ratio(ring, 0.02 * ring, mu=mu, torsion_m=0.0) == pytest.approx(1 / mu)
+
+
+def test_accepted_grasps_can_lift_their_object():
+    # the acceptance test the generator applies: the optimised contacts hold the object against
+    # gravity with a bounded squeeze; a lying 20 cm rod used to be taken by one end in a
+    # tripod (63 weights of squeeze to hold it level) and a ball pinched above its equator
+    for pair, seed in (("cylinder5/lateral_tripod", 0), ("sphere3/palmar_pinch", 0)):
+        g = generate_demo(pair, "operator3", seed=seed).grasp
+        assert g.ok, (pair, g.reason)
+        assert g.grip_ratio <= GRIP_RATIO_MAX and g.hold_ratio <= HOLD_RATIO_MAX
+        assert g.grip_ratio == pytest.approx(lift_grip_ratio(g.normals[g.achieved]))
+    geom = object_geometry("cylinder5")
+    g = generate_demo("cylinder5/lateral_tripod", "operator3", seed=0).grasp
+    contacts = geom.closest_point(g.points[g.achieved])
+    assert np.abs(contacts[:, 0]).max() < 0.06, contacts  # near the middle, not at an end
 
 
 # -- demonstrations -----------------------------------------------------------------------------

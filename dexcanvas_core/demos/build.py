@@ -232,12 +232,26 @@ def _plan(pairs: Sequence[Pair], reps: int, seed: int) -> list[tuple[Pair, str, 
     ]
 
 
+CHECK_RETRIES = 2
+"""Further seeds (``seed + CHECK_SEED_STRIDE · k``) tried for a demonstration that fails its
+plausibility checks (a grasp or script that ends a millimetre too deep on one seed)."""
+CHECK_SEED_STRIDE = 1_000_003
+
+
 def _generate_one(item: tuple[Pair, str, int]) -> tuple[Demo | None, str]:
+    """The planned demonstration, or the first of its retry seeds that passes the checks (the
+    planned one, failing, when none does)."""
     p, op, s = item
-    try:
-        return generate_demo(p, op, s), ""
-    except DemoError as e:
-        return None, str(e)
+    first = None
+    for k in range(CHECK_RETRIES + 1):
+        try:
+            demo = generate_demo(p, op, s + CHECK_SEED_STRIDE * k)
+        except DemoError as e:
+            return (first, "") if first is not None else (None, str(e))
+        if demo.passed:
+            return demo, ""
+        first = first or demo
+    return first, ""
 
 
 def _run_plan(plan: list[tuple[Pair, str, int]], workers: int) -> Iterator:
@@ -262,7 +276,9 @@ def build_demos(
     progress: bool = False,
     workers: int = 1,
 ) -> BuildReport:
-    """Generate demonstrations and write those that pass the checks as a Lance dataset.
+    """Generate demonstrations and write those that pass the checks as a Lance dataset (a
+    demonstration that fails them is generated again with up to ``CHECK_RETRIES`` other seeds;
+    the seed used is in the report).
 
     Args:
         out: destination dataset directory.
@@ -324,7 +340,10 @@ def build_demos(
             else:
                 why = demo.report.summary()
                 report.failed.setdefault(str(p), f"{op}, seed {s}: {why}")
-                log.warning("%s (%s, seed %d) failed its checks: %s", p, op, s, why)
+                log.warning(
+                    "%s (%s, seed %d and %d retries) failed its checks: %s",
+                    p, op, s, CHECK_RETRIES, why,
+                )  # fmt: skip
 
     from dexcanvas_core.io import write_dataset
 

@@ -320,6 +320,82 @@ def closure_margin(normals: np.ndarray, touching: np.ndarray) -> np.ndarray:
     return dots.min(axis=2).max(axis=1)
 
 
+LIFT_MU = 0.5
+"""Friction coefficient of the lift test (:func:`lift_grip_ratio`): below the skin–object
+values (0.5–1.2) so that a grasp passing it keeps a margin for soft, slipping contacts."""
+LIFT_TORSION_M = 0.0025
+"""Torsional friction [m] of a pad in the lift test: half the simulated hand's 5 mm
+(``sim.hand``), the same margin as ``LIFT_MU``."""
+
+
+def _cone_edges(normal: np.ndarray, mu: float, k: int = 8) -> np.ndarray:
+    """``(k, 3)`` edge directions of the friction pyramid inscribed in the cone of a contact
+    pushing on the object (along ``-normal``, the outward normal's opposite); one edge points
+    straight up the tangent plane (the direction that lifts), so a contact's best lift is
+    exact and the others are conservative."""
+    n = normal / np.linalg.norm(normal)
+    up = np.array([0.0, 0.0, 1.0]) - n[2] * n
+    if np.linalg.norm(up) < 1e-6:  # a horizontal face: any tangent
+        up = np.cross(n, [1.0, 0.0, 0.0])
+    t1 = up / np.linalg.norm(up)
+    t2 = np.cross(n, t1)
+    th = 2.0 * math.pi * np.arange(k) / k
+    tang = np.cos(th)[:, None] * t1 + np.sin(th)[:, None] * t2
+    return -n + mu * tang
+
+
+def lift_grip_ratio(
+    normals: np.ndarray,
+    points: np.ndarray | None = None,
+    centre: np.ndarray | None = None,
+    mu: float = LIFT_MU,
+    torsion_m: float = LIFT_TORSION_M,
+) -> float:
+    """Least total normal force [in units of the object's weight] with which contacts of
+    outward normals ``normals (P, 3)`` (object frame, z up) can hold the object still against
+    gravity, each force inside its friction cone (an inscribed 8-sided pyramid of ``mu``).
+
+    With the contact ``points (P, 3)`` [m] the torques balance too, about the object's centre
+    of mass ``centre`` (default the origin): each contact is a soft finger that also resists a
+    twist about its normal of up to ``torsion_m`` × its normal force (MuJoCo's condim-4
+    torsional friction, a pad's contact patch), so a pinch far from the centre of mass
+    needs a hard squeeze to keep the object from swinging about the pinch line.
+
+    ``1/μ`` for an antipodal horizontal pinch through the centre of mass or any grasp whose
+    normals balance, 1 for a contact under the object, larger when normals do not oppose or the
+    contacts are off-centre (part of the squeeze is spent balancing them), ``inf`` when the
+    contacts cannot hold the object at all.
+
+    A linear programme (``scipy.optimize.linprog``, HiGHS) over the friction pyramid's edge
+    weights and the torsion.
+    """
+    from scipy.optimize import linprog
+
+    normals = np.asarray(normals, dtype=float).reshape(-1, 3)
+    if normals.shape[0] == 0 or not np.all(np.isfinite(normals)):
+        return math.inf
+    n_unit = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+    cols, cost = [], []
+    for i, n in enumerate(n_unit):
+        for e in _cone_edges(n, mu):
+            cols.append((i, e, np.zeros(3)))
+        if points is not None and torsion_m > 0:
+            for sgn in (1.0, -1.0):  # a push along -n with a twist about n
+                cols.append((i, -n, sgn * torsion_m * n))
+        cost.extend([1.0] * (len(cols) - len(cost)))
+    rows = 3 if points is None else 6
+    A = np.zeros((rows, len(cols)))
+    c0 = np.zeros(3) if centre is None else np.asarray(centre, dtype=float)
+    for j, (i, f, m) in enumerate(cols):
+        A[:3, j] = f
+        if points is not None:
+            A[3:, j] = np.cross(np.asarray(points[i], dtype=float) - c0, f) + m
+    b = np.zeros(rows)
+    b[2] = 1.0
+    res = linprog(np.array(cost), A_eq=A, b_eq=b, bounds=(0, None), method="highs")
+    return float(res.fun) if res.status == 0 else math.inf
+
+
 def _unsupported_frames(geom, hm, d, n_world, R_o, p_o, limits: CheckLimits):
     """Frames ``(t, why)`` where the object moves or floats without support."""
     T = d.shape[0]

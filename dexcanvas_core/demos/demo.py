@@ -23,6 +23,7 @@ from dexcanvas_core.demos.grasp import (
     Grasp,
     cached_grasp,
     closing_path,
+    grasp_badness,
     in_hand_error,
     solve_fingers,
 )
@@ -46,9 +47,10 @@ from dexcanvas_core.trajectory import HandTrack, ObjectMove, ObjectTrack, Trajec
 
 log = logging.getLogger(__name__)
 
-DEMOS_VERSION = 3
+DEMOS_VERSION = 4
 """Bumped whenever generated content changes; part of the cached built-in dataset's name
-(version 1 was the scripted example of ``dexcanvas_core.example``)."""
+(version 1 was the scripted example of ``dexcanvas_core.example``; 4: grasps whose contact
+normals balance, ``grasp.GRIP_RATIO_MAX``)."""
 
 CAP_MACHINE = "dexcanvas-demos"
 """``index.capMachine`` of generated demonstrations."""
@@ -160,8 +162,9 @@ def generate_demo(
         if grasp.ok:
             break
         # this seed's posture variation led the optimiser into a local minimum: try a variant
+        # (and keep the least bad when none is acceptable)
         retry = cached_grasp(geom_key, tname, op.scale, seed + GRASP_SEED_STRIDE * k)
-        if retry.ok:
+        if retry.ok or grasp_badness(retry) < grasp_badness(grasp):
             grasp = retry
     if grasp.object_id != oid:
         grasp = _rename(grasp, oid)
