@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import json
 
-import mujoco
 import numpy as np
 import pytest
+from robot_poses import coupled
 
 from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.example import example_trajectories
@@ -76,7 +76,7 @@ def test_round_trip_recovers_robot_keypoints(hand_name):
         fin = np.isfinite(lo[6:]) & np.isfinite(hi[6:])
         q[6:][fin] = lo[6:][fin] + rng.uniform(0.2, 0.8, fin.sum()) * (hi[6:] - lo[6:])[fin]
         # Respect couplings: project through the model's equality (follower from leader).
-        q = _coupled(rt.scene.model, q)
+        q = coupled(rt.scene.model, q)
         if rt.self_distance_query.min_distance(q) < 0:
             continue  # fingers through each other: not a pose the robot can take
         human = _robot_keypoint_human(rt, q)
@@ -84,16 +84,6 @@ def test_round_trip_recovers_robot_keypoints(hand_name):
         assert out.keypoint_err[-1] < 1e-3, out.keypoint_err
         tested += 1
     assert tested >= 2
-
-
-def _coupled(m, q):
-    q = q.copy()
-    for e in range(m.neq):
-        if m.eq_type[e] == mujoco.mjtEq.mjEQ_JOINT and m.eq_obj2id[e] >= 0:
-            c = m.eq_data[e]
-            x = q[m.jnt_qposadr[m.eq_obj2id[e]]]
-            q[m.jnt_qposadr[m.eq_obj1id[e]]] = c[0] + c[1] * x + c[2] * x**2
-    return q
 
 
 def test_backends_agree_on_kinematic_terms(demo):

@@ -6,6 +6,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
+from robot_poses import coupled
 
 from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.keypoints import MANO21
@@ -32,17 +33,7 @@ def _random_pose(rt: Retargeter, rng, spread=(0.0, 1.0)) -> np.ndarray:
     fin = np.isfinite(lo[6:]) & np.isfinite(hi[6:])
     u = rng.uniform(*spread, fin.sum())
     q[6:][fin] = lo[6:][fin] + u * (hi[6:] - lo[6:])[fin]
-    return _coupled(rt.scene.model, q)
-
-
-def _coupled(m, q):
-    q = q.copy()
-    for e in range(m.neq):
-        if m.eq_type[e] == mujoco.mjtEq.mjEQ_JOINT and m.eq_obj2id[e] >= 0:
-            c = m.eq_data[e]
-            x = q[m.jnt_qposadr[m.eq_obj2id[e]]]
-            q[m.jnt_qposadr[m.eq_obj1id[e]]] = c[0] + c[1] * x + c[2] * x**2 + c[3] * x**3
-    return q
+    return coupled(rt.scene.model, q)
 
 
 def _finger_pair_penetration(rt: Retargeter, q: np.ndarray) -> float:
