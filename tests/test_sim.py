@@ -25,7 +25,7 @@ from dexcanvas_core.sim.hand import (
     mano_to_joint_angles,
 )
 from dexcanvas_core.sim.pipeline import SimConfig, prepare, simulate
-from dexcanvas_core.sim.reference import keypoint_residual
+from dexcanvas_core.sim.reference import build_reference, keypoint_residual, lowpass_reference
 from dexcanvas_core.sim.scene import build_scene
 from dexcanvas_core.sim.synthesis import (
     Perturbation,
@@ -405,3 +405,31 @@ def test_cli_synthesize_expands_and_resumes(tmp_path, demo, capsys):
     (work / "settings.json").write_text(json.dumps({"expand": 99}))
     rc = dexcanvas_main([*args, "--overwrite"])
     assert rc == 2 and "other settings" in capsys.readouterr().err
+
+
+def test_reference_lowpass_removes_fit_noise_and_keeps_scripted_motion(demo):
+    geom = object_geometry(demo.object.name)
+    ref = build_reference(demo, geom)
+    smooth = lowpass_reference(ref, 4.0)
+    # the scripted (minimum-jerk) motion passes almost unchanged
+    assert np.abs(smooth.hinges - ref.hinges).max() < 0.03
+    assert np.abs(smooth.wrist_pos - ref.wrist_pos).max() < 2e-3  # 1.5 mm at phase changes
+    assert np.abs(smooth.wrist_euler - ref.wrist_euler).max() < 0.01
+    # its world rotation stays the Euler angles' (one orientation, two views)
+    from scipy.spatial.transform import Rotation
+
+    R = np.einsum(
+        "ij,tjk->tik", smooth.R_base, Rotation.from_euler("XYZ", smooth.wrist_euler).as_matrix()
+    )
+    np.testing.assert_allclose(smooth.wrist_rot, R, atol=1e-9)
+    # white noise on the targets (a fit's jitter) is cut to well under half
+    rng = np.random.default_rng(0)
+    noisy = dataclasses.replace(ref, hinges=ref.hinges + rng.normal(0, 0.02, ref.hinges.shape))
+    err_before = np.abs(noisy.hinges - ref.hinges)[30:-30].std()
+    err_after = np.abs(lowpass_reference(noisy, 4.0).hinges - ref.hinges)[30:-30].std()
+    assert err_after < 0.3 * err_before
+    assert lowpass_reference(ref, None) is ref
+    with pytest.raises(ValidationError, match="cutoff"):
+        lowpass_reference(ref, 90.0)  # above Nyquist at 120 Hz
+    with pytest.raises(ValidationError, match="reference_lowpass_hz"):
+        SimConfig(reference_lowpass_hz=-1.0).validate()

@@ -36,7 +36,12 @@ from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.mano.skeleton import HandSkeleton
 from dexcanvas_core.sim.forces import contacts_from_frames, finger_force_series
 from dexcanvas_core.sim.hand import FINGER_HINGES, urdf_dof_26
-from dexcanvas_core.sim.reference import Reference, build_reference, keypoint_residual
+from dexcanvas_core.sim.reference import (
+    Reference,
+    build_reference,
+    keypoint_residual,
+    lowpass_reference,
+)
 from dexcanvas_core.sim.scene import PhysicsSettings, SimScene, build_scene
 from dexcanvas_core.sim.tracker import (
     MPCConfig,
@@ -71,12 +76,21 @@ class SimConfig:
     object_id: str | None = None
     """Simulate with this catalogue object instead of the trajectory's (e.g. its heavy
     variant ``cube2h`` for ``cube2``)."""
+    reference_lowpass_hz: float | None = 4.0
+    """Zero-phase low-pass of the hand targets (``reference.lowpass_reference``): mocap fit
+    noise makes held fingers open and close on the object; ``None`` tracks them as given."""
 
     def validate(self) -> SimConfig:
         if self.tracker not in TRACKERS:
             raise ValidationError(
                 f"unknown tracker {self.tracker!r}; choose one of {', '.join(TRACKERS)}",
                 field="tracker",
+            )
+        lp = self.reference_lowpass_hz
+        if lp is not None and not (np.isfinite(lp) and lp > 0):
+            raise ValidationError(
+                f"reference_lowpass_hz must be positive or None, got {lp}",
+                field="reference_lowpass_hz",
             )
         for name in ("object_scale", "mass_scale", "friction_scale", "hand_scale"):
             v = getattr(self, name)
@@ -135,6 +149,7 @@ def prepare(traj: Trajectory, cfg: SimConfig) -> tuple[ObjectGeometry, Reference
     if cfg.hand_scale != 1.0:
         skeleton = HandSkeleton(skeleton.rest_keypoints * cfg.hand_scale, "right")
         ref = build_reference(traj, geometry, skeleton=skeleton, R_base=ref.R_base)
+    ref = lowpass_reference(ref, cfg.reference_lowpass_hz)
     scene = build_scene(
         geometry,
         skeleton,
