@@ -139,7 +139,7 @@ class SurfaceContactObjective(Objective):
         self.data.qpos[: self.hand_nq] = q
         mj.mj_kinematics(self.model, self.data)
         fromto = np.zeros(6)
-        out = []
+        out, dists = [], []
         for geoms in self.finger_geoms:
             best, best_p, best_b = np.inf, np.zeros(3), ""
             for g in geoms:
@@ -149,8 +149,14 @@ class SurfaceContactObjective(Objective):
                         best, best_p = d, fromto[:3].copy()
                         best_b = self._bodies[self.model.geom_bodyid[g]]
             out.append((best_b, best_p))
-        self._cache_q, self._cache = q.copy(), out
+            dists.append(best)
+        self._cache_q, self._cache, self._cache_d = q.copy(), out, np.array(dists)
         return out
+
+    def finger_distances(self, q: np.ndarray) -> np.ndarray:
+        """(F,) [m] signed distance from each finger to the object (negative: penetrating)."""
+        self.finger_points(q)
+        return self._cache_d
 
     def distances_to_targets(self, q: np.ndarray) -> np.ndarray:
         """(F,) [m] distance from each finger's nearest surface point to its target."""
