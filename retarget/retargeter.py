@@ -116,17 +116,17 @@ class RetargetConfig:
     max_joint_speed: float = 20.0
     """Velocity bound [rad/s or m/s] per joint."""
     squeeze_depth: float = 0.01
-    force_matching: bool = False
-    """Replace the depth squeeze by force matching (``retarget.force_matching``): the human's
-    per-finger contact forces (force pipeline output) distributed over the robot's contacts
-    by the force QP and applied through the servo gains, ``Δq = K⁻¹ Jᵀ f``. Needs a
-    trajectory with contact records carrying forces."""
-    force_mu: float = 0.8
-    """Friction coefficient of the force QP's (linearised, inner) cones."""
     """Grip: where the human touches the object, the robot's position *command* (``q_command``)
     presses each contacting finger this far [m] into the surface (along the surface normal,
     finger joints only), so that position servos produce a grip force. The kinematic solution
     ``q`` itself stays outside the object. 0 disables it."""
+    force_matching: bool = False
+    """Replace the depth squeeze by force matching (``retarget.force_matching``): the human's
+    per-finger contact forces (force pipeline output) distributed over the robot's contacts
+    by the force QP and applied through the servo gains, ``Δq = K⁻¹ Jᵀ f``, after closing any
+    gap between finger and surface. Needs a trajectory with contact records carrying forces."""
+    force_mu: float = 0.8
+    """Friction coefficient of the force QP's (linearised, inner) cones."""
 
     def validate(self) -> RetargetConfig:
         if self.backend not in ("pinocchio", "mink"):
