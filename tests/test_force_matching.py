@@ -225,10 +225,9 @@ def test_cli_run_forces_reports_force_preservation(human_with_forces, tmp_path):
 
 
 def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
-    """Allegro lifting a 1.5 kg cube (the cube2/tripod demonstration, the cube's mass raised):
-    replayed open loop it slips out; the sampling MPC on the robot hand keeps it, moving the
-    commands by millimetres. (The built-in cube2 itself, 0.084 kg, no longer slips since the
-    demonstrations' grasps balance their contact normals; it did with the old ones.)"""
+    """Allegro on the built-in cube2/tripod lift: replayed open loop (default soft contacts)
+    the cube slips out; the sampling MPC on the robot hand keeps it (DexCanvas rule, no frame
+    over 5 cm), moving the commands by millimetres."""
     from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.loaders.selection import load_demonstration
     from retarget.hands import get_hand
@@ -236,7 +235,7 @@ def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
     from retarget.retargeter import Retargeter
 
     demo = load_demonstration("cube2/tripod")  # the built-in one
-    hand, geo = get_hand("allegro"), object_geometry("cube2").scaled(1.0, mass_kg=1.5)
+    hand, geo = get_hand("allegro"), object_geometry("cube2")
     rt = Retargeter(hand, geo)
     robot = rt.retarget(demo)
     # the default re-simulation's contacts (the stiff ones of force matching alone keep it)
@@ -245,7 +244,7 @@ def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
     assert replay.finger_ctrl_deviation_rad == 0.0 and replay.wrist_pos_deviation_m == 0.0
     refined = refine(hand, geo, demo, robot, rt.tip_sites, RefineConfig(**soft))
     assert not replay.success and replay.failed_at_frame is not None  # the cube slips out
-    assert refined.success and refined.object_pos_err.max() < 0.04
+    assert refined.success and refined.object_pos_err.max() < 0.05
     assert 0 < refined.wrist_pos_deviation_m < 0.03
     assert refined.ctrl.shape == (demo.num_frames, hand.compile().nu)
     m = refined.metrics()
