@@ -617,7 +617,7 @@ class Retargeter:
             delta = np.concatenate(
                 [-g * n for g, n in zip(gap, tg["contact_normals"][t][idx], strict=True)]
             )
-            dq = dq + Jg.T @ np.linalg.solve(Jg @ Jg.T + 1e-6 * np.eye(Jg.shape[0]), delta)
+            dq = dq + _damped_step(Jg, delta)
         return np.clip(q + dq, self.lower, self.upper) - q
 
     def _squeeze(self, q: np.ndarray, active: np.ndarray, normals: np.ndarray) -> np.ndarray:
@@ -637,7 +637,7 @@ class Retargeter:
         ).reshape(-1, self.nq)
         J[:, :6] = 0.0
         delta = np.concatenate([-self.cfg.squeeze_depth * normals[i] for i in idx])
-        dq = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(J.shape[0]), delta)
+        dq = _damped_step(J, delta)
         return np.clip(q + dq, self.lower, self.upper) - q
 
     def _objectives(self):
@@ -677,6 +677,12 @@ def _geom_pairs(m: mujoco.MjModel, names: list[tuple[str, str]]) -> list[tuple[i
             raise RetargetError(f"self-collision pair ({a!r}, {b!r}) is not in the scene")
         out.append((ia, ib))
     return out
+
+
+def _damped_step(J: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """Least-norm joint step moving the points of Jacobian ``J`` by ``delta``:
+    ``Jᵀ (J Jᵀ + λ I)⁻¹ δ`` with a small damping λ = 1e-6."""
+    return J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(J.shape[0]), delta)
 
 
 class _MinkSolver:
