@@ -73,7 +73,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from _common import atomic_write_json, generate_one, operator_for, pick_pairs
+from _common import atomic_write_json, generate_one, operator_for, pick_pairs, progress_bar
 
 DEFAULT_OUT = Path(__file__).parent / "results" / "force_pipeline.json"
 PLOTS_DIR = "force_plots"
@@ -435,18 +435,6 @@ def target_checks(condition: str, a: dict) -> list[dict]:
 
 
 # ------------------------------------------------------------------------------------- output
-def _progress(console):
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
-
-    return Progress(
-        "[progress.description]{task.description}",
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-    )
-
-
 def _f(x, scale: float = 1.0, fmt: str = ".2f") -> str:
     return "–" if x is None else format(scale * x, fmt)
 
@@ -636,7 +624,7 @@ def run_jobs(cfg: BenchConfig, pairs: list, plans: list, plot_dir: Path, console
     with (
         _one_thread_env(),
         ProcessPoolExecutor(cfg.workers, mp_context=ctx, initializer=_init_worker) as pool,
-        _progress(console) as prog,
+        progress_bar(console) as prog,
     ):
         task = prog.add_task("generating + fitting", total=total)
         pending = {pool.submit(_prepare, (i, p, cfg.seed, mocap)): (i, None)
