@@ -87,17 +87,24 @@ class ContactSweep:
             raise RetargetError("ContactSweep needs contacts enabled (mjDSBL_CONTACT is set)")
         self.model, self.data, self.hand_nq = model, data, hand_nq
         self._q: np.ndarray | None = None
-        self._mocap = np.zeros((model.nmocap, 7))
+        self._mocap_pos = np.zeros((model.nmocap, 3))
+        self._mocap_quat = np.zeros((model.nmocap, 4))
+        self._none_i, self._none_f, self._none_3 = np.zeros(0, int), np.zeros(0), np.zeros((0, 3))
+        self._none_b = np.zeros(0, bool)
         # Registered pairs (all limits on this sweep): (geom, geom) → registered pair index.
         self._lut = np.full(model.ngeom * model.ngeom, -1, dtype=int)
         self._ga = np.zeros(0, int)
-        # Per registered pair with a contact this configuration (closest contact only):
+        # Every contact of a registered pair this configuration, sorted by pair then distance:
         self.pair = np.zeros(0, int)
-        """(k,) registered pair indices, sorted."""
+        """(k,) registered pair indices."""
         self.dist = np.zeros(0)
         """(k,) signed distances [m]."""
         self.p_a, self.p_b, self.normal = np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
         """(k, 3) nearest points on the pair's first and second geom, unit normal first → second."""
+        self.closest = np.zeros(0, bool)
+        """(k,) the pair's closest contact (mj_geomDistance's answer for the sweep types); the
+        others are further contacts of the same pair (e.g. both ends of a capsule lying on a
+        surface)."""
 
     def register(self, pairs: Sequence[tuple[int, int]]) -> int:
         """Add pairs (hand geom first); returns the index of the first in the sweep's output."""
@@ -130,46 +137,53 @@ class ContactSweep:
     def update(self, q: np.ndarray) -> None:
         """Contacts at hand configuration ``q`` (and the current mocap poses); cached."""
         d = self.data
-        mocap = np.concatenate([d.mocap_pos, d.mocap_quat], axis=1) if self.model.nmocap else None
         if (
             self._q is not None
-            and np.array_equal(q, self._q)
-            and (mocap is None or np.array_equal(mocap, self._mocap))
+            and (q == self._q).all()
+            and (d.mocap_pos == self._mocap_pos).all()
+            and (d.mocap_quat == self._mocap_quat).all()
         ):
             return
         d.qpos[: self.hand_nq] = q
         mujoco.mj_kinematics(self.model, d)
-        full = d.warning[mujoco.mjtWarning.mjWARN_CONTACTFULL].number
+        warn = d.warning[mujoco.mjtWarning.mjWARN_CONTACTFULL]
+        full = warn.number
         mujoco.mj_collision(self.model, d)
-        if d.warning[mujoco.mjtWarning.mjWARN_CONTACTFULL].number != full:
+        if warn.number != full:
             # Dropped contacts would be pairs silently missing from the limits.
             raise RetargetError(
                 f"mj_collision ran out of contact memory ({d.ncon} contacts within the margins); "
                 "give the scene a larger memory size or smaller collision distmax values"
             )
         self._q = np.array(q, dtype=np.float64)
-        if mocap is not None:
-            self._mocap = mocap
+        self._mocap_pos, self._mocap_quat = d.mocap_pos.copy(), d.mocap_quat.copy()
         c = d.contact
-        geom = np.asarray(c.geom).reshape(-1, 2)
+        geom = c.geom.reshape(-1, 2)
         pair = self._lut[geom[:, 0] * self.model.ngeom + geom[:, 1]]
         sel = np.flatnonzero(pair >= 0)
-        dist = np.asarray(c.dist).reshape(-1)
-        # The closest contact of each pair (mj_geomDistance's answer).
-        order = sel[np.lexsort((dist[sel], pair[sel]))]
-        first = np.ones(order.size, bool)
-        first[1:] = pair[order][1:] != pair[order][:-1]
-        k = order[first]
-        self.pair, self.dist = pair[k], dist[k]
+        if not sel.size:
+            self.pair, self.dist, self.closest = self._none_i, self._none_f, self._none_b
+            self.p_a = self.p_b = self.normal = self._none_3
+            return
+        dist = c.dist.reshape(-1)
+        ps = pair[sel]
+        first = np.ones(sel.size, bool)
+        if sel.size > 1:
+            order = np.lexsort((dist[sel], ps))
+            ps, k = ps[order], sel[order]
+            np.not_equal(ps[1:], ps[:-1], out=first[1:])
+        else:
+            k = sel
+        self.pair, self.dist, self.closest = ps, dist[k], first
         # Surface points: the contact position ∓ d/2 along its normal (geom[0] → geom[1]);
         # swapped where the contact lists the pair's geoms the other way round.
-        n = np.asarray(c.frame).reshape(-1, 9)[k, :3]
-        pos = np.asarray(c.pos).reshape(-1, 3)[k]
-        half = 0.5 * self.dist[:, None] * n
-        sign = np.where(geom[k, 0] == self._ga[self.pair], 1.0, -1.0)[:, None]
-        self.normal = sign * n
-        self.p_a = pos - sign * half
-        self.p_b = pos + sign * half
+        n = c.frame.reshape(-1, 9)[k, :3]
+        sign = np.where(geom[k, 0] == self._ga[ps], 0.5, -0.5)[:, None]
+        half = (sign * self.dist[:, None]) * n
+        pos = c.pos.reshape(-1, 3)[k]
+        self.normal = 2.0 * sign * n
+        self.p_a = pos - half
+        self.p_b = pos + half
 
     def invalidate(self) -> None:
         """Forget the cached contacts (after changing the scene other than ``q``/mocap)."""
@@ -291,6 +305,11 @@ class CollisionLimit(Limit):
         self._bodies_a = np.array([self._body_names[b] for b in model.geom_bodyid[ga]], object)
         self._bodies_b = np.array([self._body_names[b] for b in model.geom_bodyid[gb]], object)
         self._fromto = np.zeros(6)
+        self._direct_seen = np.zeros(0, int)
+        self._direct_offset = 0
+        self._empty = PairDistances(
+            np.zeros(0, int), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
+        )
         self.sweep = sweep
         if sweep is not None:
             if sweep.model is not model or sweep.data is not data:
@@ -309,6 +328,12 @@ class CollisionLimit(Limit):
                         f"{distmax}; ContactSweep.set_margins first"
                     )
             self._offset = sweep.register([self.pairs[i] for i in self._swept])
+            # The per-pair pairs (box–box, mesh, cylinder) are registered too, for their
+            # further contacts (see row_points); their distances stay mj_geomDistance's.
+            direct = np.setdiff1d(np.arange(len(self.pairs)), self._swept)
+            seen = [i for i in direct.tolist() if sweep.query_distance(*self.pairs[i]) >= distmax]
+            self._direct_seen = np.array(seen, dtype=int)
+            self._direct_offset = sweep.register([self.pairs[i] for i in seen])
 
     def candidates(self) -> np.ndarray:
         """Indices of the pairs whose bounding volumes are within ``distmax`` (broad phase).
@@ -333,6 +358,10 @@ class CollisionLimit(Limit):
         if self._swept.size == len(self.pairs):
             return swept
         direct = self._query_direct(q, kinematics=False)
+        if not direct.index.size:
+            return swept
+        if not swept.index.size:
+            return direct
         return PairDistances(
             *(np.concatenate([getattr(swept, f), getattr(direct, f)]) for f in _FIELDS)
         )
@@ -344,6 +373,8 @@ class CollisionLimit(Limit):
             d.qpos[: self.hand_nq] = q
             mujoco.mj_kinematics(m, d)
         idx = self.candidates()
+        if not idx.size:
+            return self._empty
         dist = np.empty(idx.size)
         pts = np.empty((idx.size, 6))
         fromto, distmax = self._fromto, self.distmax
@@ -355,6 +386,8 @@ class CollisionLimit(Limit):
                 keep[k] = True
                 dist[k] = r
                 pts[k] = fromto
+        if not keep.any():
+            return self._empty
         p_a, p_b = pts[keep, :3], pts[keep, 3:]
         return PairDistances(idx[keep], dist[keep], p_a, p_b, _normals(dist[keep], p_a, p_b))
 
@@ -362,7 +395,9 @@ class CollisionLimit(Limit):
         sw = self.sweep
         sw.update(q)
         i = sw.pair - self._offset
-        k = np.flatnonzero((i >= 0) & (i < self._swept.size) & (sw.dist < self.distmax))
+        k = np.flatnonzero(
+            (i >= 0) & (i < self._swept.size) & sw.closest & (sw.dist < self.distmax)
+        )
         return PairDistances(self._swept[i[k]], sw.dist[k], sw.p_a[k], sw.p_b[k], sw.normal[k])
 
     def distances(self, q: np.ndarray) -> list[tuple[int, int, float, np.ndarray, np.ndarray]]:
@@ -378,8 +413,44 @@ class CollisionLimit(Limit):
         r = self.query(q)
         return float(r.distance.min()) if r.distance.size else np.inf
 
+    def _further_contacts(self) -> PairDistances:
+        """The sweep's contacts within ``distmax`` other than each pair's closest (after an
+        update at the current ``q``); for the per-pair pairs, all of theirs."""
+        sw = self.sweep
+        i = sw.pair - self._offset
+        j = sw.pair - self._direct_offset
+        swept = (i >= 0) & (i < self._swept.size) & ~sw.closest
+        direct = (j >= 0) & (j < self._direct_seen.size)
+        k = np.flatnonzero((swept | direct) & (sw.dist < self.distmax))
+        if not k.size:
+            return self._empty
+        index = np.where(swept[k], self._swept[np.clip(i[k], 0, self._swept.size - 1)], -1)
+        if self._direct_seen.size:
+            d_idx = self._direct_seen[np.clip(j[k], 0, self._direct_seen.size - 1)]
+            index = np.where(direct[k], d_idx, index)
+        return PairDistances(index, sw.dist[k], sw.p_a[k], sw.p_b[k], sw.normal[k])
+
+    def row_points(self, q: np.ndarray) -> PairDistances:
+        """The witness points of :meth:`inequalities`' rows at ``q``, in row order: each pair
+        within ``distmax`` at its closest points (:meth:`query`), then the further contacts
+        ``mj_collision`` reports for the same pairs.
+
+        A row at the closest points alone lets a step turn another part of the geom into the
+        surface: a capsule or box lying along a cylinder pivots about the constrained end and
+        the other end goes in (built-in demonstrations, Allegro and LEAP: up to 7.0 mm deep
+        with closest-point rows).
+        """
+        r = self.query(q)
+        if self.sweep is not None:
+            extra = self._further_contacts()
+            if extra.index.size:
+                r = PairDistances(
+                    *(np.concatenate([getattr(r, f), getattr(extra, f)]) for f in _FIELDS)
+                )
+        return r
+
     def inequalities(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
-        r = self.query(state.q)
+        r = self.row_points(state.q)
         self.last_min_distance = float(r.distance.min()) if r.distance.size else np.inf
         if not r.distance.size:
             return np.zeros((0, state.nv)), np.zeros(0)

@@ -41,8 +41,25 @@ class Objective(ABC):
         if e.size == 0:
             return np.zeros((state.nv, state.nv)), np.zeros(state.nv)
         J = self.jacobian(state)
-        JW = J.T * self.weights(e.shape[0])
+        JW = J.T * self._weight_vector(e.shape[0])
         return JW @ J, JW @ e
+
+    memo_weights: bool = True
+    """:meth:`weights` depends on ``weight`` and ``m`` only, so its vectors are memoised (the
+    per-iterate cost of building them is a sizeable part of a frame's solve time)."""
+
+    def _weight_vector(self, m: int) -> np.ndarray:
+        if not self.memo_weights:
+            return self.weights(m)
+        w = self.weight
+        key = (m, w.tobytes()) if isinstance(w, np.ndarray) else (m, w)
+        memo = self.__dict__.setdefault("_weights_memo", {})
+        out = memo.get(key)
+        if out is None:
+            if len(memo) > 64:
+                memo.clear()
+            out = memo[key] = np.array(self.weights(m), dtype=np.float64)
+        return out
 
     def cost(self, state: RobotState) -> float:
         """``Σ w e²`` at ``state`` (for logging and line search)."""

@@ -25,6 +25,7 @@ class ContactObjective(Objective):
     """
 
     name = "contacts"
+    memo_weights = False  # its weights also depend on normal_weight and pad_axis
 
     def __init__(
         self,

@@ -27,7 +27,7 @@ class PostureObjective(Objective):
     def qp_terms(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         # J = S (a row selection): JᵀWJ is diagonal and JᵀWe scatters W e; no matrix products.
         w = np.zeros(state.nv)
-        w[self.mask] = self.weights(int(self.mask.sum()))
+        w[self.mask] = self._weight_vector(int(self.mask.sum()))
         return np.diag(w), w * (state.q - self.q_ref)
 
 
@@ -56,5 +56,5 @@ class SmoothnessObjective(Objective):
     def qp_terms(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         if self.q_prev is None:
             return np.zeros((state.nv, state.nv)), np.zeros(state.nv)
-        w = self.weights(state.nv)  # J = I
+        w = self._weight_vector(state.nv)  # J = I
         return np.diag(w), w * (state.q - self.q_prev)

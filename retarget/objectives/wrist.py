@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 
@@ -15,12 +17,14 @@ def rotation_log(R: np.ndarray) -> np.ndarray:
     (``mju_mat2Quat`` is robust near π, where the matrix formula loses precision)."""
     quat = np.empty(4)
     mujoco.mju_mat2Quat(quat, np.ascontiguousarray(R, dtype=np.float64).reshape(9))
-    if quat[0] < 0:
-        quat = -quat  # the short way round
-    s = np.linalg.norm(quat[1:])
+    w, x, y, z = quat.tolist()
+    if w < 0:  # the short way round
+        w, x, y, z = -w, -x, -y, -z
+    s = math.sqrt(x * x + y * y + z * z)
     if s < 1e-12:
-        return 2.0 * quat[1:]  # first order: v = 2 sin(θ/2) axis ≈ θ axis
-    return quat[1:] * (2.0 * np.arctan2(s, quat[0]) / s)
+        return np.array([2.0 * x, 2.0 * y, 2.0 * z])  # first order: 2 sin(θ/2) axis ≈ θ axis
+    f = 2.0 * math.atan2(s, w) / s
+    return np.array([f * x, f * y, f * z])
 
 
 class WristPoseObjective(Objective):
