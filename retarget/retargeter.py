@@ -55,7 +55,7 @@ from retarget.objectives import (
     VectorObjective,
     WristPoseObjective,
 )
-from retarget.qp import build_qp, solve_qp
+from retarget.qp import QPSolveError, build_qp, solve_qp
 from retarget.scene import Scene, build_retarget_scene
 from retarget.state import RobotState
 
@@ -669,7 +669,16 @@ class Retargeter:
         while True:
             self.kin.forward(q)
             state = RobotState(q=q, kin=self.kin, dt=dt)
-            dq = solve_qp(build_qp(state, objectives, limits, self.cfg.damping), self.cfg.solver)
+            try:
+                dq = solve_qp(
+                    build_qp(state, objectives, limits, self.cfg.damping), self.cfg.solver
+                )
+            except QPSolveError:
+                if not fixes:
+                    raise
+                # The trust region is too small to back out as far as the rows ask: keep the
+                # last solution (deeper than the margin, shallower than without the re-steps).
+                return q
             q = q + dq
             i += 1
             if not fixes and i < iterations and np.abs(dq).max() >= self.cfg.step_tolerance:
