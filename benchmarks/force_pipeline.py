@@ -14,8 +14,8 @@ tracked in MuJoCo by the simulated MANO hand (``dexcanvas_core.sim.pipeline.simu
   default occlusion gaps and label swaps) fitted back (``mocap.fit_markers``, default options);
   the fitted MANO hand and object tracks are simulated, with the demonstration's object id;
 * ``mocap_size`` — the mocap-fitted demonstration with the object's size changed by +20 % on
-  even-numbered pairs and −20 % on odd ones (``SimConfig(object_scale=…)``; the reference is
-  unchanged, as in synthesis).
+  even-numbered pairs and −20 % on odd ones (``SimConfig(object_scale=…)``; the hand reference
+  follows the resized surface, ``sim.resize``, as in synthesis).
 
 Heavy vs light: for every pair whose object has a weighted ``H`` variant in the catalogue
 (``taxonomy.heavy_variant``: cube2 → cube2h), the clean demonstration is also simulated with

@@ -42,6 +42,7 @@ from dexcanvas_core.sim.reference import (
     keypoint_residual,
     lowpass_reference,
 )
+from dexcanvas_core.sim.resize import adapt_reference_to_size
 from dexcanvas_core.sim.scene import PhysicsSettings, SimScene, build_scene
 from dexcanvas_core.sim.tracker import (
     MPCConfig,
@@ -68,7 +69,12 @@ class SimConfig:
     mpc: MPCConfig = field(default_factory=MPCConfig)
     physics: PhysicsSettings = field(default_factory=PhysicsSettings)
     object_scale: float = 1.0
-    """Object size factor (synthesis perturbs it; the reference is left unchanged)."""
+    """Object size factor (synthesis perturbs it); the hand reference follows the resized
+    surface when ``adapt_reference_to_size`` is on."""
+    adapt_reference_to_size: bool = True
+    """When ``object_scale != 1``, move the hand reference so that the parts of the hand near
+    the object keep their signed distance to the resized surface (``sim.resize``); ``False``
+    tracks the reference captured around the original object."""
     mass_scale: float = 1.0
     friction_scale: float = 1.0
     hand_scale: float = 1.0
@@ -135,6 +141,7 @@ def prepare(traj: Trajectory, cfg: SimConfig) -> tuple[ObjectGeometry, Reference
     traj.validate()
     base = object_geometry(cfg.object_id or traj.object.name)
     geometry = base
+    source_object_pos = traj.object.pos
     if cfg.object_scale != 1.0:
         # keep the object's clearance to the table at the first frame: a larger object is
         # lifted (a smaller one lowered) by the change of its lowest point
@@ -149,6 +156,8 @@ def prepare(traj: Trajectory, cfg: SimConfig) -> tuple[ObjectGeometry, Reference
     if cfg.hand_scale != 1.0:
         skeleton = HandSkeleton(skeleton.rest_keypoints * cfg.hand_scale, "right")
         ref = build_reference(traj, geometry, skeleton=skeleton, R_base=ref.R_base)
+    if cfg.object_scale != 1.0 and cfg.adapt_reference_to_size:
+        ref, _ = adapt_reference_to_size(ref, base, geometry, source_object_pos, cfg.object_scale)
     ref = lowpass_reference(ref, cfg.reference_lowpass_hz)
     scene = build_scene(
         geometry,
