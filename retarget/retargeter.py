@@ -105,6 +105,11 @@ class RetargetConfig:
     use_collision: bool = True
     penetration_margin: float = 0.001
     """Penetration [m] the non-penetration rows allow (soft contacts need a little)."""
+    table_clearance: float = 0.003
+    """Height [m] the hand's collision geoms keep above the table. With the object's 1 mm
+    penetration margin a finger may rest on the table in the kinematic solution; re-simulated,
+    the grip squeeze then presses it into the table instead of the object (Shadow's thumb on
+    a lateral pinch of cube2)."""
     collision_distmax: float = 0.03
     """Hand–object pairs farther than this [m] are left out of an iterate."""
     use_self_collision: bool = True
@@ -114,6 +119,14 @@ class RetargetConfig:
     """Finger–finger penetration [m] the self-collision rows allow."""
     self_collision_distmax: float = 0.01
     """Hand–hand pairs farther than this [m] are left out of an iterate."""
+    use_link_contacts: bool = True
+    """A finger whose tip does not touch the object but whose middle (else proximal) phalanx
+    does (a lateral pinch's index finger, a power grasp's fingers) gets the contact on the
+    corresponding robot link (``_contact_links``) instead of none."""
+    link_contact_threshold: float = 0.011
+    """Distance [m] from a human phalanx's bone axis (MANO keypoint to keypoint) to the
+    surface below which that phalanx touches (inferred contacts): a finger's radius, about
+    8–10 mm, plus a little."""
     contact_threshold: float = 0.012
     """Human fingertip keypoint–surface distance [m] below which a fingertip is in contact
     (inferred when the trajectory has no contact records). MANO's tip keypoint sits at the end
@@ -147,7 +160,7 @@ class RetargetConfig:
         for k, v in self.__dict__.items():
             if k.startswith("w_") and not (np.isfinite(v) and v >= 0):
                 raise RetargetError(f"weight {k} must be finite and >= 0, got {v}")
-        for k in ("penetration_margin", "self_collision_margin"):
+        for k in ("penetration_margin", "self_collision_margin", "table_clearance"):
             v = getattr(self, k)
             if not (np.isfinite(v) and v >= 0):
                 raise RetargetError(f"{k} must be finite and >= 0 [m], got {v}")
@@ -286,17 +299,21 @@ class Retargeter:
         )
         self.vectors = VectorObjective(pairs, c.w_vectors)
         self.contacts = None
+        self.n_parts = np.ones(len(self.tip_sites), int)
         if geometry is not None:
-            finger_geoms = []
-            for site in self.tip_sites:
-                body = m.site_bodyid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, site)]
-                geoms = [g for g in self.scene.hand_geoms if m.geom_bodyid[g] == body]
-                if not geoms:
-                    raise RetargetError(f"hand {hand.name!r}: no collision geom on {site}'s link")
-                finger_geoms.append(geoms)
+            part_geoms = self._contact_links(hand, m)
+            self.n_parts = np.array([len(p) for p in part_geoms])
             self.contacts = SurfaceContactObjective(
-                m, self.scene.data, finger_geoms, self.scene.object_geoms, self.nq, c.w_contacts
+                m,
+                self.scene.data,
+                [p[0] for p in part_geoms],
+                self.scene.object_geoms,
+                self.nq,
+                c.w_contacts,
+                part_geoms=part_geoms if c.use_link_contacts else None,
             )
+            if not c.use_link_contacts:
+                self.n_parts[:] = 1
         q0 = hand.default_qpos(m)[: self.nq]
         self.q_default = q0
         finger_mask = np.ones(self.nq, bool)
@@ -308,7 +325,7 @@ class Retargeter:
         self.lower, self.upper = lower, upper
         self.limits = [JointLimit(lower, upper, m.jnt_limited[: self.nq].astype(bool))]
         coupling = CouplingLimit.from_mjmodel(m)
-        if coupling.rows:
+        if coupling:
             self.limits.append(coupling)
         # One mj_collision sweep per iterate finds the hand–object and hand–hand pairs within
         # their query distances, for both limits and the metrics (ContactSweep).
@@ -325,6 +342,7 @@ class Retargeter:
         if geometry is not None and self.scene.object_geoms:
             obstacles = self.scene.object_geoms + self.scene.table_geoms
             pairs_geom = [(a, b) for a in self.scene.hand_geoms for b in obstacles]
+            table = set(self.scene.table_geoms)
             self.distance_query = CollisionLimit(
                 m,
                 self.scene.data,
@@ -333,6 +351,10 @@ class Retargeter:
                 margin=c.penetration_margin,
                 distmax=c.collision_distmax,
                 sweep=self.sweep,
+                pair_margins=[
+                    -c.table_clearance if b in table else c.penetration_margin
+                    for _, b in pairs_geom
+                ],
             )
             if self.cfg.use_collision:
                 self.collision = self.distance_query
@@ -359,6 +381,36 @@ class Retargeter:
         self._mink = None
         if self.cfg.backend == "mink":
             self._mink = _MinkSolver(self)
+
+    def _contact_links(self, hand, m) -> list[list[list[int]]]:
+        """Per robot finger, the collision geoms of the links that stand for the human's
+        distal, middle and proximal phalanx (thumb: distal, proximal, metacarpal): the tip
+        site's link, then the links towards the palm that have geoms (at most three; a
+        two-link finger's proximal link takes both the middle and the proximal phalanx)."""
+        chains = hand.hand_parts(m)
+        out = []
+        for f, site in zip(self.tip_human, self.tip_sites, strict=True):
+            body = m.site_bodyid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, site)]
+            geoms = [g for g in self.scene.hand_geoms if m.geom_bodyid[g] == body]
+            if not geoms:
+                raise RetargetError(f"hand {hand.name!r}: no collision geom on {site}'s link")
+            parts = [geoms]
+            robot_finger = hand.fingers[f]
+            # A robot finger several human fingers drive (a gripper's) keeps its tip only.
+            shared = sum(v == robot_finger for v in hand.fingers.values()) > 1
+            chain = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b)
+                     for b in chains.get(robot_finger, [])]  # fmt: skip
+            if not shared and body in chain:
+                for b in reversed(chain[: chain.index(body)]):
+                    g = [x for x in self.scene.hand_geoms if m.geom_bodyid[x] == b]
+                    if g:
+                        parts.append(g)
+                    if len(parts) == 3:
+                        break
+            if len(parts) == 2:  # two links: the proximal one takes both phalanges
+                parts.append(parts[1])
+            out.append(parts)
+        return out
 
     # ------------------------------------------------------------------ targets
     def human_targets(self, traj: Trajectory) -> dict[str, np.ndarray]:
@@ -392,6 +444,7 @@ class Retargeter:
         out = {"wrist_p": wrist_p, "wrist_R": R_wrist, "keypoints": kp, "vectors": vec}
         T, F = traj.num_frames, len(self.tip_sites)
         active = np.zeros((T, F), bool)
+        parts = np.zeros((T, F), int)
         points = np.zeros((T, F, 3))
         normals = np.zeros((T, F, 3))
         if self.geometry is not None and traj.objects:
@@ -403,26 +456,66 @@ class Retargeter:
             sdf = sdf.reshape(T, F)
             n_obj = n_obj.reshape(T, F, 3)
             surf_obj = tips_obj - sdf[..., None] * n_obj  # surface point under the fingertip
+            if traj.contacts is not None:
+                by_part = self._parts_from_records(traj)
+            else:
+                by_part = np.zeros((T, F, 3), bool)
+                by_part[..., 0] = sdf < self.cfg.contact_threshold
+            # A finger whose tip does not touch may touch with its middle (else its proximal)
+            # phalanx: that link's contact replaces the tip's (lateral pinch, power grasps).
+            active = by_part[..., 0].copy()
+            for k in (0, 1, 2) if self.cfg.use_link_contacts else ():
+                seg = self._segment_rows(k)
+                a, b = h_kp[:, seg[:, 0]], h_kp[:, seg[:, 1]]  # (T, F, 3) segment ends
+                u = np.linspace(0.0, 1.0, 5)[:, None, None, None]
+                pts = (1 - u) * a[None] + u * b[None]  # (5, T, F, 3)
+                pts_obj = np.einsum("tji,stfj->stfi", R_obj, pts - p_obj[None, :, None])
+                d, n = self.geometry.sdf_and_normal(pts_obj.reshape(-1, 3))
+                d, n = d.reshape(5, T, F), n.reshape(5, T, F, 3)
+                j = d.argmin(axis=0)  # (T, F) the sample nearest the surface
+                dk = np.take_along_axis(d, j[None], 0)[0]
+                nk = np.take_along_axis(n, j[None, ..., None], 0)[0]
+                pk = np.take_along_axis(pts_obj, j[None, ..., None], 0)[0]
+                if traj.contacts is None:
+                    by_part[..., k] = dk < self.cfg.link_contact_threshold
+                # (k = 0: the distal phalanx's pad touches while the tip keypoint, at the end
+                # of the finger, is farther than contact_threshold: a lateral pinch's thumb)
+                use = by_part[..., k] & ~active & (self.n_parts[None] > k)
+                surf_obj[use] = (pk - dk[..., None] * nk)[use]
+                n_obj[use] = nk[use]
+                parts[use] = k
+                active |= use
             points = np.einsum("tij,tfj->tfi", R_obj, surf_obj) + p_obj[:, None]
             normals = np.einsum("tij,tfj->tfi", R_obj, n_obj)
-            if traj.contacts is not None:
-                active = self._active_from_records(traj)
-            else:
-                active = sdf < self.cfg.contact_threshold
-        out.update(contact_active=active, contact_points=points, contact_normals=normals)
+        out.update(
+            contact_active=active, contact_points=points, contact_normals=normals,
+            contact_part=parts,
+        )  # fmt: skip
         return out
 
-    def _active_from_records(self, traj: Trajectory) -> np.ndarray:
-        """Fingertip contact per frame from the force pipeline's part records (distal parts)."""
+    def _segment_rows(self, k: int) -> np.ndarray:
+        """(F, 2) MANO21 rows of each finger's phalanx ``k`` (0: distal, 1: middle,
+        2: proximal; the thumb's 1: proximal, 2: metacarpal)."""
+        end = lambda f: f"{f}_tip" if k == 0 else f"{f}{4 - k}"  # noqa: E731
+        return np.array([[MANO21.index(f"{f}{3 - k}"), MANO21.index(end(f))]
+                         for f in self.tip_human])  # fmt: skip
+
+    def _parts_from_records(self, traj: Trajectory) -> np.ndarray:
+        """(T, F, 3) bool: the force pipeline's contact records on each finger's distal,
+        middle and proximal part (thumb: ip, mcp, cmc)."""
         T, F = traj.num_frames, len(self.tip_sites)
-        active = np.zeros((T, F), bool)
-        distal = {"thumb_ip": "thumb", **{f"{f}_dip": f for f in FINGERS[1:]}}
+        out = np.zeros((T, F, 3), bool)
+        names = {}
+        for i, f in enumerate(self.tip_human):
+            joints = ("ip", "mcp", "cmc") if f == "thumb" else ("dip", "pip", "mcp")
+            for k, j in enumerate(joints):
+                names[f"{f}_{j}"] = (i, k)
         c = traj.contacts
         for frame, part in zip(c.frame, c.joint_name, strict=True):
-            finger = distal.get(part)
-            if finger in self.tip_human:
-                active[frame, self.tip_human.index(finger)] = True
-        return active
+            hit = names.get(part)
+            if hit is not None:
+                out[frame, hit[0], hit[1]] = True
+        return out
 
     # ------------------------------------------------------------------ solving
     def retarget(
@@ -449,7 +542,7 @@ class Retargeter:
                 self.vectors.set_targets(tg["vectors"][t])
             if self.contacts is not None:
                 active = tg["contact_active"][t] & self.cfg.use_contacts
-                self.contacts.set_contacts(active, tg["contact_points"][t])
+                self.contacts.set_contacts(active, tg["contact_points"][t], tg["contact_part"][t])
             n_it = self.cfg.first_frame_iterations if t == 0 else self.cfg.iterations
             t0 = time.perf_counter()
             q = self._solve_frame(q, n_it, traj.timestamp, t)
@@ -529,7 +622,9 @@ class Retargeter:
             if self.self_distance_query is not None:
                 self_d[t] = self.self_distance_query.min_distance(q)
             if self.contacts is not None and active_all[t].any():
-                self.contacts.set_contacts(active_all[t], tg["contact_points"][t])
+                self.contacts.set_contacts(
+                    active_all[t], tg["contact_points"][t], tg["contact_part"][t]
+                )
                 d_c = self.contacts.distances_to_targets(q)
                 c_err[t, active_all[t]] = d_c[active_all[t]]
         return {

@@ -158,6 +158,55 @@ def test_coupling_rows_hold_after_solving():
     assert q[1] == pytest.approx(0.7 * q[0] + 0.1 * q[0] ** 2, abs=1e-6)
 
 
+TENDON_COUPLED = """
+<mujoco>
+  <worldbody>
+    <body name="a">
+      <joint name="j1" type="hinge" axis="0 0 1" range="-2 2"/>
+      <geom type="capsule" fromto="0 0 0 0.1 0 0" size="0.01"/>
+      <body name="b" pos="0.1 0 0">
+        <joint name="j0" type="hinge" axis="0 0 1" range="-2 2"/>
+        <geom type="capsule" fromto="0 0 0 0.05 0 0" size="0.01"/>
+        <site name="tip" pos="0.05 0 0"/>
+      </body>
+    </body>
+  </worldbody>
+  <tendon>
+    <fixed name="couple" limited="true" range="-0.001 0.001">
+      <joint joint="j0" coef="0.00705"/>
+      <joint joint="j1" coef="-0.00805"/>
+    </fixed>
+  </tendon>
+</mujoco>
+"""
+
+
+def test_limited_tendon_rows_hold_after_solving():
+    """A Shadow-style distal coupling (a fixed tendon held within ±1 mm): the target asks for a
+    straight distal joint, the rows keep j0 ≈ 1.14 j1 as the simulator will."""
+    m = mujoco.MjModel.from_xml_string(TENDON_COUPLED)
+    kin = PinocchioKinematics(m)
+    coupling = CouplingLimit.from_mjmodel(m)
+    assert coupling and not coupling.rows and len(coupling.ranges) == 1
+    kp = KeypointObjective(["tip"])
+    # Reachable with j1 = 0.8, j0 = 0 (which violates the tendon by 6.4 mm).
+    a, b = 0.8, 0.0
+    tip = np.array(
+        [0.1 * np.cos(a) + 0.05 * np.cos(a + b), 0.1 * np.sin(a) + 0.05 * np.sin(a + b), 0]
+    )
+    kp.set_targets(tip[None])
+    q = np.zeros(2)  # (j1, j0)
+    for _ in range(30):
+        q = q + solve_qp(build_qp(_state(kin, q), [kp], [coupling], damping=1e-4))
+    L = 0.00705 * q[1] - 0.00805 * q[0]
+    assert -0.001 - 1e-9 <= L <= 0.001 + 1e-9
+    assert q[0] > 0.3  # it still reached towards the target
+    free = q.copy()
+    for _ in range(30):
+        free = free + solve_qp(build_qp(_state(kin, free), [kp], [], damping=1e-4))
+    assert abs(0.00705 * free[1] - 0.00805 * free[0]) > 0.002  # without the rows it breaks it
+
+
 OBJECT_SCENE = """
 <mujoco>
   <compiler angle="radian"/>

@@ -113,7 +113,9 @@ def _check_rows(limit, kin, q, rng, errors: list, step=1e-6):
     r = limit.row_points(q)  # the pairs within distmax, then extra contacts of per-pair pairs
     n_closest = limit.query(q).index.size
     assert G.shape == (r.index.size, q.size) and h.shape == (r.index.size,)
-    np.testing.assert_allclose(h, r.distance + limit.margin, atol=1e-12)  # no recovery cap hit
+    np.testing.assert_allclose(
+        h, r.distance + limit.pair_margins[r.index], atol=1e-12
+    )  # (no recovery cap hit)
     v = r.p_b - r.p_a
     n = v / np.linalg.norm(v, axis=1, keepdims=True) * np.where(r.distance >= 0, 1, -1)[:, None]
     ga = [limit.pairs[i][0] for i in r.index]

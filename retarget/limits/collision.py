@@ -232,6 +232,7 @@ class CollisionLimit(Limit):
             with ``self_collision``).
         hand_nq: number of hand joints (the first ``hand_nq`` entries of ``qpos``).
         margin: allowed penetration [m] (e.g. 0.002).
+        pair_margins: per pair, instead of ``margin`` (negative: a clearance the pair keeps).
         distmax: pairs farther than this [m] are ignored this iterate.
         self_collision: ``geom_b`` moves with the hand too (``J = J_a − J_b``).
         sweep: find the pairs with a sphere, capsule or plane from this shared ``mj_collision``
@@ -257,6 +258,7 @@ class CollisionLimit(Limit):
         self_collision: bool = False,
         max_recovery: float | None = None,
         sweep: ContactSweep | None = None,
+        pair_margins: Sequence[float] | None = None,
     ):
         if not (np.isfinite(margin) and margin >= 0):
             raise RetargetError(f"collision margin must be finite and >= 0, got {margin}")
@@ -269,6 +271,12 @@ class CollisionLimit(Limit):
                 raise RetargetError(f"collision pair ({a}, {b}): geom ids must be < {model.ngeom}")
         self.hand_nq = hand_nq
         self.margin = margin
+        self.pair_margins = np.full(len(self.pairs), float(margin))
+        if pair_margins is not None:
+            pm = np.asarray(pair_margins, dtype=np.float64)
+            if pm.shape != (len(self.pairs),) or not np.isfinite(pm).all():
+                raise RetargetError(f"pair_margins must be {len(self.pairs)} finite values [m]")
+            self.pair_margins = pm
         self.distmax = distmax
         self.self_collision = self_collision
         if max_recovery is not None and not (np.isfinite(max_recovery) and max_recovery >= 0):
@@ -473,7 +481,7 @@ class CollisionLimit(Limit):
         else:
             J = state.kin.point_jacobians(tuple(self._bodies_a[r.index]), r.p_a)  # (k, 3, nv)
         G = np.einsum("ki,kij->kj", n, J)
-        h = r.distance + self.margin
+        h = r.distance + self.pair_margins[r.index]
         if self.max_recovery is not None:
             h = np.maximum(h, -self.max_recovery)
         return G[ok], h[ok]

@@ -3,6 +3,14 @@
 MuJoCo expresses couplings as equality constraints: ``mjEQ_JOINT`` (``q₁ = poly(q₂)``, e.g.
 mimic joints and linkages) and ``mjEQ_TENDON`` between fixed tendons (``L₁ = poly(L₂)``,
 ``L = Σ cᵢ qᵢ``). Each becomes one row ``A Δq = b`` that also pulls a violated coupling back.
+
+Limited fixed tendons bound a joint combination, ``lo ≤ aᵀq ≤ hi``: a narrow range is a
+coupling (Shadow's ``T_*J1c`` hold ``0.00705·J0 − 0.00805·J1`` within ±1 mm, so the distal
+joint follows the middle one), a wide one bounds a sum. The simulator enforces both, so the
+kinematic solution must too: two rows ``±aᵀΔq ≤ …`` each. (Without them the solver left
+Shadow's distal joints straight while the middle ones flexed, 6 mm outside the ±1 mm
+coupling, and the re-simulated fingertips landed elsewhere: J0 0.0 kinematic vs 0.47 rad
+simulated on a lateral pinch.)
 """
 
 from __future__ import annotations
@@ -26,9 +34,22 @@ class CouplingLimit(Limit):
 
     name = "coupling"
 
-    def __init__(self, rows: list[tuple[np.ndarray, np.ndarray, np.ndarray]]):
-        """``rows``: (a1 (nv,), a2 (nv,) or zeros for a constant, polycoef (5,))."""
+    def __init__(
+        self,
+        rows: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
+        ranges: list[tuple[np.ndarray, float, float]] | None = None,
+    ):
+        """``rows``: (a1 (nv,), a2 (nv,) or zeros for a constant, polycoef (5,));
+        ``ranges``: (a (nv,), lo, hi) for ``lo ≤ aᵀq ≤ hi`` (limited fixed tendons)."""
         self.rows = rows
+        self.ranges = list(ranges or [])
+        if self.ranges:
+            self._G = np.array([a for a, _, _ in self.ranges])
+            self._lo = np.array([lo for _, lo, _ in self.ranges])
+            self._hi = np.array([hi for _, _, hi in self.ranges])
+
+    def __bool__(self) -> bool:
+        return bool(self.rows or self.ranges)
 
     @classmethod
     def from_mjmodel(cls, m: mujoco.MjModel) -> CouplingLimit:
@@ -50,7 +71,21 @@ class CouplingLimit(Limit):
             else:
                 continue  # connect/weld constraints do not couple a hand's joints
             rows.append((a1, a2, coef))
-        return cls(rows)
+        ranges = []
+        for t in range(m.ntendon):
+            adr, num = int(m.tendon_adr[t]), int(m.tendon_num[t])
+            fixed = all(m.wrap_type[adr + k] == mujoco.mjtWrap.mjWRAP_JOINT for k in range(num))
+            if fixed and m.tendon_limited[t]:
+                lo, hi = (float(x) for x in m.tendon_range[t])
+                ranges.append((_fixed_tendon_coefficients(m, t), lo, hi))
+        return cls(rows, ranges)
+
+    def inequalities(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
+        if not self.ranges:
+            return np.zeros((0, state.nv)), np.zeros(0)
+        G = self._G[:, : state.nv]
+        s = G @ state.q
+        return np.concatenate([G, -G]), np.concatenate([self._hi - s, s - self._lo])
 
     def equalities(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         if not self.rows:

@@ -99,29 +99,60 @@ class SurfaceContactObjective(Objective):
         model, data: the retargeting scene; ``data.qpos[:hand_nq]`` is synchronised with ``q``.
         finger_geoms: per robot finger, its distal link's collision geom ids.
         object_geoms: the object's geom ids.
+        part_geoms: per robot finger, the geom ids of each link that may hold its contact
+            (``[0]`` is ``finger_geoms[f]``, then links towards the palm); :meth:`set_contacts`
+            picks one per frame (a lateral pinch holds the object on the index finger's
+            middle phalanx, not its tip). Default: the distal link only.
     """
 
     name = "contacts"
 
-    def __init__(self, model, data, finger_geoms, object_geoms, hand_nq: int, weight: float = 1.0):
+    def __init__(
+        self,
+        model,
+        data,
+        finger_geoms,
+        object_geoms,
+        hand_nq: int,
+        weight: float = 1.0,
+        part_geoms=None,
+    ):
         super().__init__(weight)
         import mujoco
 
         self._mj = mujoco
         self.model, self.data = model, data
         self.finger_geoms = [list(g) for g in finger_geoms]
+        F = len(self.finger_geoms)
+        self.part_geoms = (
+            [[list(g)] for g in self.finger_geoms]
+            if part_geoms is None
+            else [[list(g) for g in parts] for parts in part_geoms]
+        )
+        """Per finger, the collision geoms of each of its links that can hold a contact: part 0
+        is the distal link (``finger_geoms``), then the next links towards the palm."""
+        if len(self.part_geoms) != F or any(
+            not parts or parts[0] != f
+            for parts, f in zip(self.part_geoms, self.finger_geoms, strict=True)
+        ):
+            raise RetargetError("contacts: part_geoms[f][0] must be finger_geoms[f]")
         self.object_geoms = list(object_geoms)
         self.hand_nq = hand_nq
-        F = len(self.finger_geoms)
         self.active = np.zeros(F, bool)
         self.points = np.zeros((F, 3))
+        self.parts = np.zeros(F, int)
         self._cache_q: np.ndarray | None = None
         self._cache: list[tuple[str, np.ndarray]] = []
         self._bodies = [
             mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(model.nbody)
         ]
 
-    def set_contacts(self, active: np.ndarray, points_world: np.ndarray) -> None:
+    def set_contacts(
+        self, active: np.ndarray, points_world: np.ndarray, parts: np.ndarray | None = None
+    ) -> None:
+        """This frame's contacts: per finger, whether it touches, the surface point [m] and
+        (``parts``) which of its links touches (index into ``part_geoms[f]``; default 0, the
+        distal link)."""
         a = np.asarray(active, bool)
         p = np.asarray(points_world, dtype=np.float64)
         F = len(self.finger_geoms)
@@ -129,11 +160,16 @@ class SurfaceContactObjective(Objective):
             raise RetargetError(f"contacts: expected ({F},), ({F}, 3); got {a.shape}, {p.shape}")
         if not np.isfinite(p[a]).all():
             raise RetargetError("contacts: active contact points contain NaN")
-        self.active, self.points = a, p
+        k = np.zeros(F, int) if parts is None else np.asarray(parts, dtype=int)
+        if k.shape != (F,) or any(
+            not 0 <= j < len(g) for j, g in zip(k.tolist(), self.part_geoms, strict=True)
+        ):
+            raise RetargetError(f"contacts: parts must be ({F},) link indices, got {k}")
+        self.active, self.points, self.parts = a, p, k
         self._cache_q = None
 
     def finger_points(self, q: np.ndarray) -> list[tuple[str, np.ndarray]]:
-        """Per finger: (body name, surface point [m] of the finger nearest the object)."""
+        """Per finger: (body name, surface point [m] of its contact link nearest the object)."""
         if self._cache_q is not None and np.array_equal(q, self._cache_q):
             return self._cache
         mj = self._mj
@@ -141,9 +177,9 @@ class SurfaceContactObjective(Objective):
         mj.mj_kinematics(self.model, self.data)
         fromto = np.zeros(6)
         out, dists = [], []
-        for geoms in self.finger_geoms:
+        for parts, k in zip(self.part_geoms, self.parts.tolist(), strict=True):
             best, best_p, best_b = np.inf, np.zeros(3), ""
-            for g in geoms:
+            for g in parts[k]:
                 for o in self.object_geoms:
                     d = mj.mj_geomDistance(self.model, self.data, g, o, 1.0, fromto)
                     if d < best:
