@@ -862,6 +862,19 @@ class _MinkSolver:
                 )
             )
         self.constraints = [mink.EqualityConstraintTask(m, cost=1.0)] if m.neq else []
+        coupling = next((c for c in rt.limits if isinstance(c, CouplingLimit)), None)
+        if coupling is not None and coupling.ranges:
+            # Limited fixed tendons (Shadow's distal coupling): mink has no tendon limit, so
+            # the same rows as the Pinocchio backend's (G Δq ≤ h, Δq = v·dt with dt = 1).
+            kin = rt.kin
+
+            class _TendonRanges(mink.Limit):
+                def compute_qp_inequalities(self, configuration, dt):
+                    q = configuration.q[: rt.nq]
+                    G, h = coupling.inequalities(RobotState(q=q, kin=kin))
+                    return mink.Constraint(G=G * dt, h=h)
+
+            self.limits.append(_TendonRanges())
 
     def _task(self, objective):
         import mink

@@ -117,6 +117,23 @@ def test_mink_backend_runs_and_matches(demo):
     assert abs(a.keypoint_err.mean() - b.keypoint_err.mean()) < 5e-3
 
 
+@pytest.mark.parametrize("backend", ["pinocchio", "mink"])
+def test_shadow_distal_coupling_holds(demo, backend):
+    """Shadow's limited fixed tendons (distal J0 ≈ 1.14 J1 within ±1 mm, and the sum bounds)
+    hold along the retargeted trajectory on both backends, as the simulator enforces them."""
+    from retarget.limits import CouplingLimit
+
+    rt = Retargeter(get_hand("shadow"), object_geometry("cube2"), RetargetConfig(backend=backend))
+    coupling = CouplingLimit.from_mjmodel(rt.scene.model)
+    assert len(coupling.ranges) >= 4
+    out = rt.retarget(demo)
+    G = coupling._G[:, : rt.nq]
+    L = out.q[1:] @ G.T  # (the first frame starts from the open posture)
+    assert (L >= coupling._lo - 2e-4).all() and (L <= coupling._hi + 2e-4).all()
+    bent = out.q[:, [out.joint_names.index(f"{f}J0") for f in ("FF", "MF")]]
+    assert bent.max() > 0.2  # the distal joints follow the middle ones
+
+
 def test_no_penetration_beyond_margin(demo):
     cfg = RetargetConfig()
     out = Retargeter(get_hand("shadow"), object_geometry("cube2"), cfg).retarget(demo)
