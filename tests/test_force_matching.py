@@ -225,17 +225,17 @@ def test_cli_run_forces_reports_force_preservation(human_with_forces, tmp_path):
 
 
 def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
-    """Allegro on the built-in cube2/tripod lift: replayed open loop (default soft contacts)
-    the cube slips out; the sampling MPC on the robot hand keeps it (DexCanvas rule, no frame
-    over 5 cm), moving the commands by millimetres."""
+    """Allegro on the built-in cuboid3/adducted_thumb: replayed open loop (default soft
+    contacts) the cuboid slips out (at frame 617); the sampling MPC on the robot hand keeps it
+    (DexCanvas rule, no frame over 5 cm), moving the commands by millimetres."""
     from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.loaders.selection import load_demonstration
     from retarget.hands import get_hand
     from retarget.refine import RefineConfig, refine
     from retarget.retargeter import Retargeter
 
-    demo = load_demonstration("cube2/tripod")  # the built-in one
-    hand, geo = get_hand("allegro"), object_geometry("cube2")
+    demo = load_demonstration("cuboid3/adducted_thumb")  # the built-in one
+    hand, geo = get_hand("allegro"), object_geometry("cuboid3")
     rt = Retargeter(hand, geo)
     robot = rt.retarget(demo)
     # the default re-simulation's contacts (the stiff ones of force matching alone keep it)
@@ -243,7 +243,7 @@ def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
     replay = refine(hand, geo, demo, robot, rt.tip_sites, RefineConfig(tracker="open_loop", **soft))
     assert replay.finger_ctrl_deviation_rad == 0.0 and replay.wrist_pos_deviation_m == 0.0
     refined = refine(hand, geo, demo, robot, rt.tip_sites, RefineConfig(**soft))
-    assert not replay.success and replay.failed_at_frame is not None  # the cube slips out
+    assert not replay.success and replay.failed_at_frame is not None  # the cuboid slips out
     assert refined.success and refined.object_pos_err.max() < 0.05
     assert 0 < refined.wrist_pos_deviation_m < 0.03
     assert refined.ctrl.shape == (demo.num_frames, hand.compile().nu)

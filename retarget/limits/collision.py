@@ -282,6 +282,9 @@ class CollisionLimit(Limit):
         if max_recovery is not None and not (np.isfinite(max_recovery) and max_recovery >= 0):
             raise RetargetError(f"max_recovery must be finite and >= 0, got {max_recovery}")
         self.max_recovery = max_recovery
+        self.hold_only = False
+        """Rows only forbid going deeper (``h ≥ 0``) instead of asking a penetrating pair to
+        back out: the solver's fallback when backing out is infeasible (joint limits)."""
         self.last_min_distance = np.inf
         self._body_names = [
             mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(model.nbody)
@@ -484,4 +487,6 @@ class CollisionLimit(Limit):
         h = r.distance + self.pair_margins[r.index]
         if self.max_recovery is not None:
             h = np.maximum(h, -self.max_recovery)
+        if self.hold_only:
+            h = np.maximum(h, 0.0)
         return G[ok], h[ok]
