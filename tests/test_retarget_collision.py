@@ -356,3 +356,19 @@ def test_fingers_do_not_roll_into_a_cylinder(hand, pair):
         idx = rt.collision.row_points(r.q[t]).index
         multi += int(np.unique(idx).size < idx.size)
     assert multi > 0
+
+
+def test_rows_when_every_pair_is_per_pair():
+    """The Panda gripper's self-collision pairs are all box–box (none on the sweep's fast
+    path): its closed fingers still give rows from their mj_collision contacts (this raised an
+    IndexError in the force-preservation benchmark)."""
+    rt = Retargeter(get_hand("panda"), None)
+    lim = rt.self_collision
+    assert lim._swept.size == 0 and lim._direct_seen.size > 0
+    q = rt.q_default.copy()
+    q[6:] = 0.0  # closed: the finger pads touch
+    rt.kin.forward(q)
+    G, h = lim.inequalities(RobotState(q=q, kin=rt.kin))
+    assert (
+        G.shape[0] > lim.query(q).index.size > 0 and np.isfinite(G).all() and np.isfinite(h).all()
+    )

@@ -435,7 +435,9 @@ class CollisionLimit(Limit):
         k = np.flatnonzero((swept | direct) & (sw.dist < self.distmax))
         if not k.size:
             return self._empty
-        index = np.where(swept[k], self._swept[np.clip(i[k], 0, self._swept.size - 1)], -1)
+        index = np.full(k.size, -1)
+        if self._swept.size:
+            index = np.where(swept[k], self._swept[np.clip(i[k], 0, self._swept.size - 1)], -1)
         if self._direct_seen.size:
             d_idx = self._direct_seen[np.clip(j[k], 0, self._direct_seen.size - 1)]
             index = np.where(direct[k], d_idx, index)

@@ -106,6 +106,7 @@ class SurfaceContactObjective(Objective):
     """
 
     name = "contacts"
+    memo_weights = False  # its weights follow the frame's contacts and ramps
 
     def __init__(
         self,
@@ -141,6 +142,7 @@ class SurfaceContactObjective(Objective):
         self.active = np.zeros(F, bool)
         self.points = np.zeros((F, 3))
         self.parts = np.zeros(F, int)
+        self.ramp = np.ones(F)
         self._cache_q: np.ndarray | None = None
         self._cache: list[tuple[str, np.ndarray]] = []
         self._bodies = [
@@ -148,11 +150,15 @@ class SurfaceContactObjective(Objective):
         ]
 
     def set_contacts(
-        self, active: np.ndarray, points_world: np.ndarray, parts: np.ndarray | None = None
+        self,
+        active: np.ndarray,
+        points_world: np.ndarray,
+        parts: np.ndarray | None = None,
+        ramp: np.ndarray | None = None,
     ) -> None:
-        """This frame's contacts: per finger, whether it touches, the surface point [m] and
+        """This frame's contacts: per finger, whether it touches, the surface point [m],
         (``parts``) which of its links touches (index into ``part_geoms[f]``; default 0, the
-        distal link)."""
+        distal link) and (``ramp``, in [0, 1]) a factor on its weight (default 1)."""
         a = np.asarray(active, bool)
         p = np.asarray(points_world, dtype=np.float64)
         F = len(self.finger_geoms)
@@ -165,7 +171,10 @@ class SurfaceContactObjective(Objective):
             not 0 <= j < len(g) for j, g in zip(k.tolist(), self.part_geoms, strict=True)
         ):
             raise RetargetError(f"contacts: parts must be ({F},) link indices, got {k}")
-        self.active, self.points, self.parts = a, p, k
+        r = np.ones(F) if ramp is None else np.asarray(ramp, dtype=np.float64)
+        if r.shape != (F,) or not (np.isfinite(r).all() and (r >= 0).all()):
+            raise RetargetError(f"contacts: ramp must be ({F},) finite values >= 0, got {r}")
+        self.active, self.points, self.parts, self.ramp = a, p, k, r
         self._cache_q = None
 
     def finger_points(self, q: np.ndarray) -> list[tuple[str, np.ndarray]]:
@@ -199,6 +208,9 @@ class SurfaceContactObjective(Objective):
         """(F,) [m] distance from each finger's nearest surface point to its target."""
         pts = self.finger_points(q)
         return np.array([np.linalg.norm(p - t) for (_, p), t in zip(pts, self.points, strict=True)])
+
+    def weights(self, m: int) -> np.ndarray:
+        return float(self.weight) * np.repeat(self.ramp[self.active], 3)
 
     def error(self, state: RobotState) -> np.ndarray:
         if not self.active.any():
