@@ -82,9 +82,11 @@ class RetargetConfig:
     of 3."""
     max_feasibility_iterations: int = 3
     """Extra iterations a frame may take while its solution penetrates the object (or one
-    finger another) by more than the margin + 0.5 mm (see ``_solve_frame``). Measured on
-    Allegro's box fingertips, generated cylinder5/tripod_variation: 4.6 mm deepest penetration
-    without the check, 1.5 mm with it."""
+    finger another) by more than the margin + 0.5 mm (see ``_solve_frame``). Measured with
+    closest-point rows only, LEAP on generated cylinder1h/adducted_thumb: deepest penetration
+    4.78 mm without the check, 1.46 mm with it; with every contact's rows, LEAP on the built-in
+    cylinder2/extension_type: 2.27 mm with full-speed re-steps, 1.41 mm with the shrinking
+    trust regions."""
     solver: str = "daqp"
     # Contacts dominate: where the human touches the object, the robot finger goes to the same
     # surface point even if the (scaled) keypoints and the wrist must give way. Measured on
@@ -131,9 +133,9 @@ class RetargetConfig:
     65 m/s²). Off by default: with 0.1 s, benchmarks/retarget_speed_quality.py (3 hands × 20
     pairs) measured strict re-sim success 27 % against 33 % without (the grasp forms later)."""
     use_link_contacts: bool = True
-    """A finger whose tip does not touch the object but whose middle (else proximal) phalanx
-    does (a lateral pinch's index finger, a power grasp's fingers) gets the contact on the
-    corresponding robot link (``_contact_links``) instead of none."""
+    """A finger whose tip keypoint does not touch the object but whose distal pad, middle or
+    proximal phalanx does (a lateral pinch's thumb pad, a power grasp's fingers) gets the
+    contact on the corresponding robot link (``_contact_links``) instead of none."""
     link_contact_threshold: float = 0.011
     """Distance [m] from a human phalanx's bone axis (MANO keypoint to keypoint) to the
     surface below which that phalanx touches (inferred contacts): a finger's radius, about
@@ -315,10 +317,10 @@ class Retargeter:
         )
         self.vectors = VectorObjective(pairs, c.w_vectors)
         self.contacts = None
-        self.n_parts = np.ones(len(self.tip_sites), int)
         if geometry is not None:
             part_geoms = self._contact_links(hand, m)
-            self.n_parts = np.array([len(p) for p in part_geoms])
+            if not c.use_link_contacts:
+                part_geoms = [p[:1] for p in part_geoms]
             self.contacts = SurfaceContactObjective(
                 m,
                 self.scene.data,
@@ -326,10 +328,8 @@ class Retargeter:
                 self.scene.object_geoms,
                 self.nq,
                 c.w_contacts,
-                part_geoms=part_geoms if c.use_link_contacts else None,
+                part_geoms=part_geoms,
             )
-            if not c.use_link_contacts:
-                self.n_parts[:] = 1
         q0 = hand.default_qpos(m)[: self.nq]
         self.q_default = q0
         finger_mask = np.ones(self.nq, bool)
@@ -477,8 +477,10 @@ class Retargeter:
             else:
                 by_part = np.zeros((T, F, 3), bool)
                 by_part[..., 0] = sdf < self.cfg.contact_threshold
-            # A finger whose tip does not touch may touch with its middle (else its proximal)
-            # phalanx: that link's contact replaces the tip's (lateral pinch, power grasps).
+            # A finger whose tip keypoint does not touch may touch with its distal pad, else its
+            # middle, else its proximal phalanx: that link's contact replaces the tip's
+            # (lateral pinch, power grasps).
+            n_parts = np.array([len(p) for p in self.contacts.part_geoms])[None]
             active = by_part[..., 0].copy()
             for k in (0, 1, 2) if self.cfg.use_link_contacts else ():
                 seg = self._segment_rows(k)
@@ -496,7 +498,7 @@ class Retargeter:
                     by_part[..., k] = dk < self.cfg.link_contact_threshold
                 # (k = 0: the distal phalanx's pad touches while the tip keypoint, at the end
                 # of the finger, is farther than contact_threshold: a lateral pinch's thumb)
-                use = by_part[..., k] & ~active & (self.n_parts[None] > k)
+                use = by_part[..., k] & ~active & (n_parts > k)
                 surf_obj[use] = (pk - dk[..., None] * nk)[use]
                 n_obj[use] = nk[use]
                 parts[use] = k

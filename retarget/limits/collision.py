@@ -428,20 +428,17 @@ class CollisionLimit(Limit):
         """The sweep's contacts within ``distmax`` other than each pair's closest (after an
         update at the current ``q``); for the per-pair pairs, all of theirs."""
         sw = self.sweep
+        index = np.full(sw.pair.size, -1)  # the limit's pair of each sweep contact (-1: none)
         i = sw.pair - self._offset
+        swept = (i >= 0) & (i < self._swept.size)
+        index[swept] = self._swept[i[swept]]
         j = sw.pair - self._direct_offset
-        swept = (i >= 0) & (i < self._swept.size) & ~sw.closest
         direct = (j >= 0) & (j < self._direct_seen.size)
-        k = np.flatnonzero((swept | direct) & (sw.dist < self.distmax))
+        index[direct] = self._direct_seen[j[direct]]
+        k = np.flatnonzero(((swept & ~sw.closest) | direct) & (sw.dist < self.distmax))
         if not k.size:
             return self._empty
-        index = np.full(k.size, -1)
-        if self._swept.size:
-            index = np.where(swept[k], self._swept[np.clip(i[k], 0, self._swept.size - 1)], -1)
-        if self._direct_seen.size:
-            d_idx = self._direct_seen[np.clip(j[k], 0, self._direct_seen.size - 1)]
-            index = np.where(direct[k], d_idx, index)
-        return PairDistances(index, sw.dist[k], sw.p_a[k], sw.p_b[k], sw.normal[k])
+        return PairDistances(index[k], sw.dist[k], sw.p_a[k], sw.p_b[k], sw.normal[k])
 
     def row_points(self, q: np.ndarray) -> PairDistances:
         """The witness points of :meth:`inequalities`' rows at ``q``, in row order: each pair
