@@ -404,3 +404,31 @@ def test_contact_ramp_keeps_onsets_from_snapping_the_wrist():
         q = rt.retarget(traj).q
         peak[ramp] = (np.linalg.norm(np.diff(q[1:, :3], axis=0), axis=1) * traj.fps).max()
     assert peak[0.1] < 2.5 < peak[0.0]
+
+
+def test_predicted_warm_start_takes_fewer_steps_without_overshooting():
+    """Frames start from a prediction (wrist moved as the human's, fingers at their last
+    velocity): fewer QP solves per frame, the same keypoint error, and no faster wrist at a
+    contact onset than when starting from the previous solution (extrapolating the robot
+    wrist's own jump there doubled it)."""
+    from dexcanvas_core.loaders.selection import load_demonstration
+
+    traj = load_demonstration("cylinder1/lateral_tripod")
+    geom = object_geometry(traj.object.name)
+    out = {}
+    for ws in (False, True):
+        rt = Retargeter(get_hand("shadow"), geom, RetargetConfig(warm_start_extrapolate=ws))
+        solves = [0]
+        step = rt._solve_step
+
+        def counted(*a, _step=step, _n=solves, **k):
+            _n[0] += 1
+            return _step(*a, **k)
+
+        rt._solve_step = counted
+        r = rt.retarget(traj)
+        speed = np.linalg.norm(np.diff(r.q[:, :3], axis=0), axis=1) * traj.fps
+        out[ws] = (solves[0] / traj.num_frames, r.keypoint_err.mean(), speed.max())
+    assert out[True][0] < 0.85 * out[False][0]
+    assert out[True][1] < out[False][1] + 5e-4
+    assert out[True][2] < 1.1 * out[False][2]

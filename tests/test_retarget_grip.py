@@ -1,0 +1,81 @@
+"""The default grip: contact forces from the object's weight and motion (``grip="wrench"``)
+instead of a fixed squeeze depth, and which fingers press at all."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dexcanvas_core.demos.geometry import object_geometry
+from dexcanvas_core.loaders.selection import load_demonstration
+from dexcanvas_core.rotations import aa_to_matrix
+from retarget.hands import get_hand
+from retarget.retargeter import RetargetConfig, Retargeter, opposed_contacts
+
+
+def test_opposed_contacts():
+    n = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 0, 1.0], [0, 1.0, 0], [-0.5, -0.866, 0]])
+    active = np.array([True, True, True, False, True])
+    # 0 ↔ 1 and 1·4 = 0.5 (no), 0·4 = −0.5 (yes); 2 (top face) opposes nobody; 3 is inactive
+    np.testing.assert_array_equal(opposed_contacts(active, n), [True, True, False, False, True])
+    assert not opposed_contacts(np.array([True, False]), n[:2]).any()  # one finger alone
+
+
+@pytest.fixture(scope="module")
+def lifted_run():
+    traj = load_demonstration("cube2/tripod")
+    geom = object_geometry(traj.object.name)
+    rt = Retargeter(get_hand("allegro"), geom)
+    assert rt.cfg.grip == "wrench"
+    return traj, geom, rt, rt.retarget(traj)
+
+
+def test_grip_forces_carry_the_weight_off_the_table(lifted_run):
+    """Physics invariant: where the object is off the table and barely accelerating, the
+    planned robot contact forces sum to its weight (up the way); on the table, before the
+    grip's lead time, the hand is asked for no force (only opposed fingers squeeze)."""
+    traj, geom, rt, r = lifted_run
+    p = traj.object.pos.astype(np.float64)
+    low = geom.lowest_z(aa_to_matrix(traj.object.rot_aa.astype(np.float64)), p)
+    acc = np.zeros_like(p)
+    acc[1:-1] = (p[2:] - 2 * p[1:-1] + p[:-2]) * traj.fps**2
+    still = (low > 0.02) & (np.linalg.norm(acc, axis=1) < 0.3)
+    assert still.sum() > 50
+    total = r.robot_force[still].sum(axis=1)
+    mg = geom.mass_kg * 9.81
+    ok = r.wrench_shortfall[still] < 0.05 * mg
+    assert ok.mean() > 0.9
+    np.testing.assert_allclose(total[ok, 2], mg, rtol=0.15)
+    assert np.abs(total[ok, :2]).max() < 0.15 * mg
+    # the wrench asked for: the weight off the table, nothing on it before the lead time
+    W = rt._grip_targets(traj)["wrench"]
+    np.testing.assert_allclose(W[still, 2], mg, rtol=0.05)
+    rest = low < 1e-3
+    rest[np.flatnonzero(~rest)[0] - round(rt.cfg.grip_lead_s * traj.fps) - 1 :] = False
+    assert rest.sum() > 50 and not W[rest].any()
+
+
+def test_a_lone_finger_is_not_pressed_into_the_object(lifted_run):
+    """On the table, a frame whose only contact has no finger pushing back keeps the command
+    on the kinematic solution (pressing it would only shove the object)."""
+    traj, geom, rt, r = lifted_run
+    tg = rt.human_targets(traj)
+    lone = tg["contact_active"].sum(axis=1) == 1
+    p = traj.object.pos.astype(np.float64)
+    low = geom.lowest_z(aa_to_matrix(traj.object.rot_aa.astype(np.float64)), p)
+    frames = np.flatnonzero(lone & (low < 1e-3))
+    frames = frames[frames < np.flatnonzero(low > 1e-3)[0] - 30]
+    if not frames.size:
+        pytest.skip("no lone-contact frame on the table in this demonstration")
+    np.testing.assert_array_equal(r.q_command[frames], r.q[frames])
+
+
+def test_depth_grip_still_available_and_validated():
+    rt = Retargeter(get_hand("allegro"), object_geometry("cube2"), RetargetConfig(grip="depth"))
+    assert rt.cfg.grip == "depth"
+    from retarget.errors import RetargetError
+
+    with pytest.raises(RetargetError, match="grip"):
+        RetargetConfig(grip="hard").validate()
+    with pytest.raises(RetargetError, match="grip_force_n"):
+        RetargetConfig(grip_force_n=-1.0).validate()
