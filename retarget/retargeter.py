@@ -621,20 +621,7 @@ class Retargeter:
             t0 = time.perf_counter()
             q0 = q
             if t >= 2 and self.cfg.warm_start_extrapolate:
-                # The wrist moves as the human's did, the fingers at their last velocity.
-                q0 = q.copy()
-                dw = wq[t] - wq[t - 1]
-                dw[3:] = (dw[3:] + np.pi) % (2 * np.pi) - np.pi  # Euler angles wrap
-                q0[:6] += dw
-                act = tg["contact_active"]
-                if (act[t] == act[t - 1]).all() and (act[t - 1] == act[t - 2]).all():
-                    # (not across a contact switching: its jump is no velocity to go on with)
-                    q0[6:] += Q[t - 1, 6:] - Q[t - 2, 6:]
-                q0 = np.clip(q0, self.lower, self.upper)
-                if self._too_deep(q0):
-                    # a prediction into the object can be more than one step can undo (the
-                    # example cube2/tripod, Shadow: 17 mm deep); start from the last solution
-                    q0 = q
+                q0 = self._warm_start(Q[t - 2 : t], wq[t - 1 : t + 1], tg["contact_active"], t)
             q = self._solve_frame(q0, n_it, traj.timestamp, t)
             if fm is not None:
                 Qc[t] = q + self._force_squeeze(q, t, tg, fm)
@@ -954,6 +941,25 @@ class Retargeter:
             finally:
                 for x in lims:
                     x.hold_only = False
+
+    def _warm_start(
+        self, Q_last: np.ndarray, wq: np.ndarray, active: np.ndarray, t: int
+    ) -> np.ndarray:
+        """Frame ``t``'s starting point from the last two solutions ``Q_last`` (2, nq), the
+        human wrist's joint coordinates at ``t − 1`` and ``t`` and the contact flags: the
+        wrist moves as the human's did, the fingers at their last velocity unless a contact
+        switched in the last two frames (its jump is no velocity to go on with). A prediction
+        deeper in the object than the margins falls back to the last solution (more than one
+        step may be needed to undo it: the example cube2/tripod, Shadow, 17 mm deep)."""
+        q = Q_last[1]
+        q0 = q.copy()
+        dw = wq[1] - wq[0]
+        dw[3:] = (dw[3:] + np.pi) % (2 * np.pi) - np.pi  # Euler angles wrap
+        q0[:6] += dw
+        if (active[t] == active[t - 1]).all() and (active[t - 1] == active[t - 2]).all():
+            q0[6:] += q[6:] - Q_last[0, 6:]
+        q0 = np.clip(q0, self.lower, self.upper)
+        return q if self._too_deep(q0) else q0
 
     def _too_deep(self, q: np.ndarray) -> bool:
         """Whether ``q`` is deeper than a collision limit's margin + 0.5 mm anywhere (one
