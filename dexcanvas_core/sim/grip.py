@@ -12,9 +12,17 @@ surface stops it (the "squeeze", ``Δq = K⁻¹ Jᵀ f``):
   (the reference already moves it), so the magnitudes ``F_k ≥ 0`` minimise
   ``‖Σ_k F_k n_k + F_palm n_palm‖² + λ Σ_k (F_k − F_hold)²`` — balanced against each other and
   against the palm when it touches (``F_palm ≥ 0`` free: the wrist carries it) — with
-  ``F_hold = max(F_min, s · m·g / (μ · n_fingers))``, enough friction to carry ``s`` times the
-  object's weight shared by the fingers near it. ``w`` ∈ [0, 1] ramps with the pad's distance to
-  the surface (``grip_weights``) and is smoothed in time;
+  ``F_hold = F_min + λ · s · m·g / (μ · n_fingers)``: a contact-keeping force plus enough
+  friction to carry ``s`` times the object's weight shared by the fingers near it (``additive``;
+  otherwise the larger of the two, the earlier model, under which a heavy object got barely more
+  than a light one: 4.6 vs 4 N per pad for ``cylinder1h``/``cylinder1``). ``w`` ∈ [0, 1] ramps
+  with the pad's distance to the surface (``grip_weights``) and is smoothed in time;
+* ``λ`` ∈ [0, 1] (:func:`carried_load`) is the share of the weight the hand carries: 0 while the
+  reference object rests on the table, 1 once it is lifted, built up ahead of lift-off (grip
+  force–load force coupling: people raise the grip *before* the object leaves the table).
+  Without it the first finger to reach a resting object got the whole weight-sized force
+  (``n_fingers`` = 1, 14 N for a 0.47 kg cylinder) and pushed or tipped the object before the
+  others arrived — the lift-off drops of heavy objects on the force-pipeline benchmark;
 * ``J`` is the pad point's translational Jacobian over that finger's hinges, ``K`` the hinges'
   position gains: at equilibrium against the surface ``K (q_target − q) = Jᵀ f``;
 * optionally (``max_gap_m`` > 0, off by default) a pad that the reference holds short of the
@@ -29,6 +37,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.keypoints import FINGERS
 from dexcanvas_core.sim.hand import FINGER_HINGES, HAND_JOINTS
 
@@ -62,6 +71,8 @@ def squeeze_offsets(
     palm_contact_m: float = 0.01,
     balance: bool = True,
     max_gap_m: float = 0.0,
+    load: np.ndarray | None = None,
+    additive: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(T, 51)`` joint-target offsets and ``(T, 5)`` the commanded pad forces [N].
 
@@ -72,6 +83,10 @@ def squeeze_offsets(
         weights: ``(T, 5)`` grip weights in [0, 1] per finger.
         balance: balance the pad forces (module docstring); ``False``: every pad gets
             ``F_hold`` (e.g. one finger pressing a fixed object).
+        load: ``(T,)`` share ``λ`` ∈ [0, 1] of the weight the hand carries
+            (:func:`carried_load`); ``None``: the whole weight at every frame.
+        additive: ``F_hold = F_min + F_load`` (module docstring); ``False``: the larger of the
+            two.
     """
     m = scene.model
     d = mujoco.MjData(m)
@@ -81,6 +96,9 @@ def squeeze_offsets(
     kp = m.actuator_gainprm[hand.actuator, 0]
     mass = scene.mass_kg
     T = ctrl_ref.shape[0]
+    load = np.ones(T) if load is None else np.asarray(load, dtype=np.float64)
+    if load.shape != (T,) or not np.all((load >= 0.0) & (load <= 1.0)):
+        raise ValidationError(f"load must be ({T},) values in [0, 1]", field="load")
     out = np.zeros((T, len(HAND_JOINTS)))
     force = np.zeros((T, len(FINGERS)))
     jacp = np.zeros((3, m.nv))
@@ -99,7 +117,8 @@ def squeeze_offsets(
         R_o = d.xmat[scene.object_body].reshape(3, 3)
         p_o = d.xpos[scene.object_body]
         n_near = max(1.0, float((w > 0.5).sum()))
-        F_hold = max(force_min_n, safety * mass * GRAVITY / (friction * n_near))
+        F_load = load[t] * safety * mass * GRAVITY / (friction * n_near)
+        F_hold = force_min_n + F_load if additive else max(force_min_n, F_load)
         act = [k for k in range(len(geoms)) if w[k] > 0]
         pts_k, n_k, J_k, gaps = [], [], [], []
         for k in act:
@@ -131,6 +150,52 @@ def squeeze_offsets(
             out[t, cols[k]] = dq
             force[t, k] = w[k] * F[i]
     return out, force
+
+
+def carried_load(
+    geometry,
+    object_pos: np.ndarray,
+    object_quat: np.ndarray,
+    fps: float,
+    *,
+    clear_m: tuple[float, float] = (0.001, 0.004),
+    lead_s: float = 0.2,
+) -> np.ndarray:
+    """``(T,)`` share ``λ`` ∈ [0, 1] of the object's weight the hand carries in the reference.
+
+    ``λ`` ramps from 0 to 1 as the reference object's lowest point rises from ``clear_m[0]`` to
+    ``clear_m[1]`` above the table (z = 0), is then brought forward by ``lead_s`` (the largest
+    value over the next ``lead_s`` seconds) and ramped in over ``lead_s / 2`` (moving average),
+    so that the grip is built up before lift-off and released after set-down.
+
+    Args:
+        geometry: the object's ``ObjectGeometry`` (``lowest_z``).
+        object_pos, object_quat: ``(T, 3)`` [m], ``(T, 4)`` (w, x, y, z) reference object pose.
+        fps: frame rate [Hz]; clear_m: clearance ramp [m]; lead_s: anticipation [s].
+    """
+    from scipy.spatial.transform import Rotation
+
+    p = np.asarray(object_pos, dtype=np.float64)
+    q = np.asarray(object_quat, dtype=np.float64)
+    lo, hi = clear_m
+    if not (0.0 <= lo < hi) or lead_s < 0.0:
+        raise ValidationError(
+            f"clearance ramp must satisfy 0 ≤ lo < hi and lead ≥ 0, got {clear_m}, {lead_s}",
+            field="clear_m",
+        )
+    R = Rotation.from_quat(q, scalar_first=True).as_matrix()
+    h = np.asarray(geometry.lowest_z(R, p), dtype=np.float64)
+    lam = np.clip((h - lo) / (hi - lo), 0.0, 1.0)
+    n = round(lead_s * fps)
+    T = lam.shape[0]
+    if n > 0 and T > 1:
+        pad = np.concatenate([lam, np.full(n, lam[-1])])
+        lam = np.max(np.lib.stride_tricks.sliding_window_view(pad, n + 1)[:T], axis=1)
+        k = max(1, n // 2)
+        if k > 1:  # ramp in: a moving average ending at each frame (never later than lam)
+            pad = np.concatenate([np.full(k - 1, lam[0]), lam])
+            lam = np.convolve(pad, np.ones(k) / k, mode="valid")
+    return np.clip(lam, 0.0, 1.0)
 
 
 def _closest_on_axis(scene, d, g, s, R_o, p_o) -> tuple[np.ndarray, np.ndarray]:

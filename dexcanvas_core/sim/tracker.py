@@ -9,8 +9,9 @@ per finger [×0.4 rad, added to all flexion hinges of that finger]) is what a tr
 each data frame; ``u`` is the paper's exponentially smoothed residual. ``grip_t`` is the
 contact-aware grip bias of :mod:`dexcanvas_core.sim.grip`: fingers whose reference pad is within
 ``grip_far_m`` of the object surface get joint-target offsets that press the pad into the
-surface with a force sized to carry the object, so position actuators grip instead of resting
-on it.
+surface with a contact-keeping force plus, while the reference object is off the table (and
+from shortly before it leaves it), a force sized to carry the object's weight, so position
+actuators grip instead of resting on it.
 
 The reward (the DexCanvas paper's) per frame is ``exp(-60·pos_err) + exp(-10·rot_err) −
 ‖a‖²``; a rollout fails at the first frame whose object position error exceeds 5 cm.
@@ -40,7 +41,7 @@ from dexcanvas_core.sim.forces import (
     finish_frame,
     read_contacts,
 )
-from dexcanvas_core.sim.grip import squeeze_offsets
+from dexcanvas_core.sim.grip import carried_load, squeeze_offsets
 from dexcanvas_core.sim.hand import FINGER_HINGES, HAND_JOINTS
 from dexcanvas_core.sim.reference import Reference
 
@@ -65,6 +66,19 @@ class TrackingConfig:
     grip_force_min_n: float = 4.0
     grip_safety: float = 3.0
     """Grip force per finger: carry this many times the object's weight by friction."""
+    grip_load_lead_s: float | None = 0.2
+    """Grip force–load coupling (:func:`~dexcanvas_core.sim.grip.carried_load`): the
+    weight-sized part of the grip force applies only while the reference object is off the
+    table, built up this long [s] before lift-off (``F_min`` alone while it rests there);
+    ``None``: the weight-sized force whenever a finger is near the object (the earlier model,
+    which let the first finger to arrive push a resting heavy object away)."""
+    grip_additive: bool = True
+    """Pad force ``grip_force_min_n`` + the weight-carrying share (``True``) or the larger of
+    the two (``False``, the earlier model: a heavy object got barely more grip than a light
+    one, and slipped out of the grasp while held)."""
+    grip_load_clear_m: tuple[float, float] = (0.001, 0.004)
+    """Clearance [m] of the reference object's lowest point over the table at which the
+    carried share of its weight ramps from 0 to 1."""
     grip_near_m: float = 0.002
     grip_far_m: float = 0.02
     """The grip ramps from 0 (pad ``grip_far_m`` from the surface) to full (``grip_near_m``)."""
@@ -175,6 +189,7 @@ class TrackingEnv:
             self.M = np.asarray(basis, dtype=np.float64)
             self.tip_weight = np.asarray(tip_weight, dtype=np.float64)
             self.grip_force = np.zeros_like(self.tip_weight)
+            self.load = np.ones(ref.num_frames)
             self.qpos0 = self.ctrl_ref[0] if qpos0 is None else np.asarray(qpos0)
             self.action_dim = self.M.shape[-1]
             self.reset()
@@ -193,11 +208,18 @@ class TrackingEnv:
         self.tip_weight = grip_weights(ref, self.cfg, tip_radius)
         self.ctrl_ref = ref.ctrl()
         self.grip_force = np.zeros_like(self.tip_weight)
+        self.load = np.ones(ref.num_frames)
+        if self.cfg.grip_load_lead_s is not None:
+            self.load = carried_load(
+                scene.geometry, ref.object_pos, ref.object_quat, ref.fps,
+                clear_m=self.cfg.grip_load_clear_m, lead_s=self.cfg.grip_load_lead_s,
+            )  # fmt: skip
         if self.cfg.grip:
             offsets, self.grip_force = squeeze_offsets(
                 scene, self.ctrl_ref, ref.object_pos, ref.object_quat, self.tip_weight,
                 force_min_n=self.cfg.grip_force_min_n, safety=self.cfg.grip_safety,
-                friction=float(m.geom_friction[scene.object_geoms, 0].max()),
+                friction=float(m.geom_friction[scene.object_geoms, 0].max()), load=self.load,
+                additive=self.cfg.grip_additive,
             )  # fmt: skip
             self.ctrl_ref = self.ctrl_ref + offsets
         if not np.isfinite(ref.tips_object).all():
