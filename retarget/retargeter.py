@@ -239,7 +239,7 @@ class RobotTrajectory:
     q: np.ndarray
     """(T, nq) joint positions in MuJoCo ``qpos`` order; the first 6 are the floating wrist."""
     q_command: np.ndarray
-    """(T, nq) position-servo targets: ``q`` plus the grip squeeze on contact frames."""
+    """(T, nq) position-servo targets: ``q`` plus the grip's offsets on contact frames."""
     timestamp: np.ndarray
     """(T,) [s]."""
     tip_sites: list[str]
@@ -259,11 +259,14 @@ class RobotTrajectory:
     to the human's contact point; NaN elsewhere."""
     solve_time_s: float
     robot_force: np.ndarray | None = None
-    """(T, F, 3) [N] force matching's commanded contact force per robot finger (on the object)."""
+    """(T, F, 3) [N] the commanded contact force per robot finger (on the object): force
+    matching's, or the weight-aware grip's (``grip="wrench"``); ``None`` with ``grip="depth"``."""
     human_force: np.ndarray | None = None
-    """(T, F, 3) [N] the human force of the finger each robot finger stands for."""
+    """(T, F, 3) [N] the human force of the finger each robot finger stands for (force
+    matching only)."""
     wrench_shortfall: np.ndarray | None = None
-    """(T,) [N] how far the commanded forces fall short of the human's object force."""
+    """(T,) [N] how far the commanded forces fall short of the object force asked for (the
+    human's with force matching; the weight and motion's with the weight-aware grip)."""
     meta: dict = field(default_factory=dict)
 
     @property
@@ -304,6 +307,11 @@ class RobotTrajectory:
                 contact_active=self.contact_active,
                 contact_err=self.contact_err,
                 meta=np.array(json.dumps({"hand": self.hand, **self.meta}, default=str)),
+                **{
+                    k: v
+                    for k in ("robot_force", "human_force", "wrench_shortfall")
+                    if (v := getattr(self, k)) is not None
+                },
                 **(extra or {}),
             )
         os.replace(tmp, path)

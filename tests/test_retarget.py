@@ -213,6 +213,9 @@ def test_cli_run_writes_outputs(small_dataset, tmp_path, capsys):
     assert z["self_min_distance"].shape == (120,)
     assert z["q"].shape == (120, len(z["joint_names"]))
     assert z["finger_force_world"].shape == (120, 5, 3)
+    # the weight-aware grip's commanded contact forces (Allegro: 4 fingers)
+    assert z["robot_force"].shape == (120, 4, 3) and z["wrench_shortfall"].shape == (120,)
+    assert "human_force" not in z.files
     assert not list(out.glob(".*tmp"))
 
 
