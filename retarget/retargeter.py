@@ -185,7 +185,8 @@ class RetargetConfig:
     the object's weight and motion need (a margin against slip)."""
     grip_lead_s: float = 0.15
     """``grip="wrench"``: the weight is carried from this long [s] before the object leaves
-    the table (the grip must be there when the table stops helping)."""
+    the table (the grip must be there when the table stops helping), ramped in as the force
+    pipeline's grip does (``dexcanvas_core.sim.grip.carried_load``)."""
     force_matching: bool = False
     """Replace the depth squeeze by force matching (``retarget.force_matching``): the human's
     per-finger contact forces (force pipeline output) distributed over the robot's contacts
@@ -746,27 +747,27 @@ class Retargeter:
         return (vols[:, None] * cents).sum(0) / vols.sum()
 
     def _grip_targets(self, traj: Trajectory) -> dict:
-        """Per-frame object wrench the hand must supply when it alone carries the object.
-
-        Off the table (its lowest point above 5 mm, or within ``grip_lead_s`` before it
-        leaves it: the grip must be there when the table stops helping), the hand supplies
-        ``m (a + g ẑ)`` with ``a`` the object's captured acceleration (50 ms smoothing), and no
-        torque about the centre of mass; on the table, nothing."""
-        from dexcanvas_core.sim.pipeline import _capture_acceleration
+        """Per-frame object wrench the hand must supply: ``λ m (a + g ẑ)`` and no torque about
+        the centre of mass, with ``a`` the object's captured acceleration (50 ms smoothing) and
+        ``λ`` the share of the weight the hand carries (the force pipeline's
+        ``sim.grip.carried_load``: 0 while the object rests on the table, 1 off it, built up
+        over the ``grip_lead_s`` before lift-off: the grip must be there when the table stops
+        helping)."""
+        from dexcanvas_core.rotations import aa_to_quat_wxyz
+        from dexcanvas_core.sim.grip import carried_load
+        from dexcanvas_core.sim.pipeline import capture_acceleration
 
         T, F = traj.num_frames, len(self.tip_sites)
         kp, tau_max = self._servo_gains()
         R = aa_to_matrix(traj.object.rot_aa.astype(np.float64))
         p = traj.object.pos.astype(np.float64)
-        lifted = self.geometry.lowest_z(R, p) > 0.005
-        lead = max(round(self.cfg.grip_lead_s * traj.fps), 0)
-        held = lifted.copy()
-        for k in range(1, lead + 1):
-            held[:-k] |= lifted[k:]
-        acc = _capture_acceleration(p, traj.fps)
+        load = carried_load(
+            self.geometry, p, aa_to_quat_wxyz(traj.object.rot_aa), traj.fps,
+            lead_s=self.cfg.grip_lead_s,
+        )  # fmt: skip
+        acc = capture_acceleration(p, traj.fps)
         W = np.zeros((T, 6))
-        W[:, :3] = self.geometry.mass_kg * (acc + np.array([0.0, 0.0, 9.81]))
-        W[~held] = 0.0
+        W[:, :3] = (load * self.geometry.mass_kg)[:, None] * (acc + np.array([0.0, 0.0, 9.81]))
         return {
             "mode": "grip",
             "kp": kp,

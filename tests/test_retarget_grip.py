@@ -65,8 +65,7 @@ def test_a_lone_finger_is_not_pressed_into_the_object(lifted_run):
     low = geom.lowest_z(aa_to_matrix(traj.object.rot_aa.astype(np.float64)), p)
     frames = np.flatnonzero(lone & (low < 1e-3))
     frames = frames[frames < np.flatnonzero(low > 1e-3)[0] - 30]
-    if not frames.size:
-        pytest.skip("no lone-contact frame on the table in this demonstration")
+    assert frames.size > 10  # the built-in cube2/tripod: the thumb touches first
     np.testing.assert_array_equal(r.q_command[frames], r.q[frames])
 
 

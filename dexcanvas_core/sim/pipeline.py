@@ -207,7 +207,7 @@ def _moving_average(x: np.ndarray, fps: float, window_s: float = CAPTURE_SMOOTH_
     return np.stack([np.convolve(pad[:, i], k, mode="valid") for i in range(x.shape[1])], axis=1)
 
 
-def _capture_acceleration(pos: np.ndarray, fps: float) -> np.ndarray:
+def capture_acceleration(pos: np.ndarray, fps: float) -> np.ndarray:
     """``(T, 3)`` captured object acceleration [m/s²]: central differences of the smoothed
     position track."""
     pos = _moving_average(pos, fps)
@@ -239,7 +239,7 @@ def _result(traj, cfg, geometry, ref, scene, env, log, cpu_s) -> SimResult:
     wrench = np.array([fc.wrench for fc in log.contacts])
     table = np.array([fc.table_wrench for fc in log.contacts])
     a_sim = np.asarray(log.object_acc)
-    a_cap = _capture_acceleration(ref.object_pos, fps)[:T]
+    a_cap = capture_acceleration(ref.object_pos, fps)[:T]
     F_ext = wrench[:, :3] + table[:, :3] + m * g
     ne_sim = np.linalg.norm(F_ext - m * a_sim, axis=1) / mg
     ne_cap = np.linalg.norm(_moving_average(F_ext, fps) - m * a_cap, axis=1) / mg
