@@ -178,8 +178,10 @@ class RetargetConfig:
     42 / 70 %. Pressing every contact by a fixed depth shoves the object with the first finger
     to arrive or one resting on top (Allegro on generated cylinder6/rotation: the index alone on
     the top face at 11 N, 7× the weight; 52 N when the next finger's squeeze switched on) and
-    squeezes too little for a heavier object (Shadow on cube1/tripod: 2 N, the cube left on the
-    table)."""
+    presses along the human's contact normals whether that grips or not (Shadow on generated
+    cube1/tripod: the thumb on the top edge at 8 N and a finger on the top face at 3.6 N pushed
+    the cube down, net −2.75 m·g, while the finger opposite the thumb pressed 0 N; at lift-off
+    every contact force fell to zero and the cube stayed on the table)."""
     grip_force_n: float = 3.0
     """``grip="wrench"``: normal force [N] each opposed contact presses with on top of what
     the object's weight and motion need (a margin against slip)."""
@@ -822,7 +824,7 @@ class Retargeter:
             # No human forces: the wrench the object needs, plus a light squeeze between
             # fingers that push against each other (an unopposed finger is not pressed).
             active = tg["contact_active"][t]
-            opp = opposed_contacts(active, normals) if active.any() else active
+            opp = opposed_contacts(active, normals)
             f_des = -self.cfg.grip_force_n * normals * opp[:, None]
             if not W.any():
                 active = opp

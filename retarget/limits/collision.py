@@ -285,7 +285,6 @@ class CollisionLimit(Limit):
         self.hold_only = False
         """Rows only forbid going deeper (``h ≥ 0``) instead of asking a penetrating pair to
         back out: the solver's fallback when backing out is infeasible (joint limits)."""
-        self.last_min_distance = np.inf
         self._near = np.zeros(0, int)  # pairs within NEAR at the last inequalities()
         self._check_data: mujoco.MjData | None = None
         self._body_names = [
@@ -494,7 +493,6 @@ class CollisionLimit(Limit):
 
     def inequalities(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         r = self.row_points(state.q)
-        self.last_min_distance = float(r.distance.min()) if r.distance.size else np.inf
         self._near = np.unique(r.index[r.distance < self.NEAR])
         if not r.distance.size:
             return np.zeros((0, state.nv)), np.zeros(0)
