@@ -54,6 +54,8 @@ processes (spawned; one OMP/MKL/torch thread each)::
     python benchmarks/force_pipeline.py                     # 32 pairs, 3 conditions, MPC
     python benchmarks/force_pipeline.py --n-pairs 2 --conditions clean mocap \\
         --tracker open_loop --workers 1 --plots 1 --out /tmp/fp.json   # smoke run
+    python benchmarks/force_pipeline.py --conditions mocap --no-heavy \
+        --set grip_force_floor_n=None --out /tmp/fp_ablation.json       # an ablation
 """
 
 from __future__ import annotations
@@ -120,6 +122,9 @@ class BenchConfig:
     """Force plots for every run of the first ``plots`` pairs."""
     heavy: bool = True
     """Also run the clean demonstration with the heavy object variant (when one exists)."""
+    tracking: tuple[tuple[str, object], ...] = ()
+    """``TrackingConfig`` fields overridden in every run (ablations: ``--set
+    grip_force_min_n=2``); recorded in the JSON's ``sim_config``."""
 
     def validate(self) -> BenchConfig:
         from dexcanvas_core.errors import ValidationError
@@ -141,7 +146,40 @@ class BenchConfig:
             )
         if self.plots < 0:
             raise ValidationError(f"plots must be ≥ 0, got {self.plots}", field="plots")
+        tracking_config(self)  # unknown fields and bad values fail here, before any run
         return self
+
+
+def tracking_config(cfg: BenchConfig):
+    """The runs' ``TrackingConfig``: the defaults with ``cfg.tracking``'s overrides."""
+    from dexcanvas_core.errors import ValidationError
+    from dexcanvas_core.sim.tracker import TrackingConfig
+
+    names = {f.name for f in dataclasses.fields(TrackingConfig)}
+    bad = [k for k, _ in cfg.tracking if k not in names]
+    if bad:
+        raise ValidationError(
+            f"unknown TrackingConfig field(s) {', '.join(bad)}; available: "
+            f"{', '.join(sorted(names))}",
+            field="tracking",
+        )
+    return dataclasses.replace(TrackingConfig(), **dict(cfg.tracking))
+
+
+def parse_override(text: str) -> tuple[str, object]:
+    """``"name=value"`` → ``(name, value)``, the value a Python literal (``2``, ``True``,
+    ``(0.001, 0.004)``, ``None``)."""
+    import ast
+
+    name, sep, value = text.partition("=")
+    if not sep or not name.strip():
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    try:
+        return name.strip(), ast.literal_eval(value.strip())
+    except (ValueError, SyntaxError):
+        raise argparse.ArgumentTypeError(
+            f"{name.strip()}: {value.strip()!r} is not a Python literal (e.g. 2.0, True, None)"
+        ) from None
 
 
 # ------------------------------------------------------------------------------------- plan
@@ -157,7 +195,7 @@ def plan_runs(i: int, pair, cfg: BenchConfig) -> list[tuple[str, object]]:
     from dexcanvas_core.sim.pipeline import SimConfig
     from dexcanvas_core.taxonomy import heavy_variant
 
-    base = SimConfig(tracker=cfg.tracker)
+    base = SimConfig(tracker=cfg.tracker, tracking=tracking_config(cfg))
     runs = [
         (c, dataclasses.replace(base, object_scale=object_scale(c, i)))
         for c in CONDITIONS
@@ -706,7 +744,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         "benchmark": "force_pipeline",
         "command": " ".join(["python benchmarks/force_pipeline.py", *sys.argv[1:]]),
         "config": {**dataclasses.asdict(cfg), "out": str(cfg.out)},
-        "sim_config": SimConfig(tracker=cfg.tracker).as_dict(),
+        "sim_config": SimConfig(tracker=cfg.tracker, tracking=tracking_config(cfg)).as_dict(),
         "mocap": {
             "noise_mm": MOCAP_NOISE_MM,
             "dropout": MOCAP_DROPOUT,
@@ -776,6 +814,16 @@ def main(argv: list[str] | None = None) -> int:
         default=True,
         help="also run clean demonstrations with the heavy object variant",
     )
+    ap.add_argument(
+        "--set",
+        dest="tracking",
+        metavar="FIELD=VALUE",
+        type=parse_override,
+        action="append",
+        default=[],
+        help="override a TrackingConfig field in every run (repeatable), e.g. "
+        "--set grip_force_min_n=2.0",
+    )
     a = ap.parse_args(argv)
     logging.basicConfig(level=logging.ERROR)
     cfg = BenchConfig(
@@ -787,6 +835,7 @@ def main(argv: list[str] | None = None) -> int:
         seed=a.seed,
         plots=a.plots,
         heavy=a.heavy,
+        tracking=tuple(a.tracking),
     )
     run_benchmark(cfg)
     return 0

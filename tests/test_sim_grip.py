@@ -10,7 +10,12 @@ import pytest
 from dexcanvas_core.demos import OPERATORS, generate_demo
 from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.errors import ValidationError
-from dexcanvas_core.sim.grip import GRAVITY, carried_load, squeeze_offsets
+from dexcanvas_core.sim.grip import (
+    GRAVITY,
+    carried_load,
+    contact_keeping_force,
+    squeeze_offsets,
+)
 from dexcanvas_core.sim.pipeline import SimConfig, prepare, simulate
 from dexcanvas_core.sim.tracker import TrackingConfig, TrackingEnv
 
@@ -136,3 +141,31 @@ def test_heavy_object_is_lifted_without_being_dropped(heavy):
     assert res.metrics["object_pos_err_max_m"] < 0.02
     # the hand carries the object's weight at the end of the clip
     assert res.wrench[-10:, 2].mean() > 0.8 * res.metrics["mass_kg"] * GRAVITY
+
+
+def test_contact_keeping_force_is_gentler_on_light_objects():
+    # k · m·g inside the range, clipped at both ends
+    assert contact_keeping_force(0.085, 4.0, 2.0, 2.7) == pytest.approx(2.7 * 0.085 * GRAVITY)
+    assert contact_keeping_force(0.012, 4.0, 2.0, 2.7) == 2.0
+    assert contact_keeping_force(0.200, 4.0, 2.0, 2.7) == 4.0
+    assert contact_keeping_force(0.509, 4.0, 2.0, 2.7) == 4.0
+    # no floor: the fixed force of the earlier model
+    assert contact_keeping_force(0.012, 4.0, None, 2.7) == 4.0
+    for floor, k in ((0.0, 2.7), (5.0, 2.7), (2.0, -1.0)):
+        with pytest.raises(ValidationError):
+            contact_keeping_force(0.1, 4.0, floor, k)
+
+
+def test_light_cylinder_pinched_from_above_is_lifted():
+    """``cylinder5/lateral_tripod`` (85 g, lying; pair 28 of ``benchmarks/force_pipeline.py``):
+    the thumb pinches from above, index and middle touch the side at the equator. With 4 N
+    per pad the thumb pressed the cylinder down with ~7 × its weight while it rested, and it
+    slid out of the pinch at lift-off (frame 321); the weight-scaled contact force lifts it."""
+    traj = generate_demo("cylinder5/lateral_tripod", sorted(OPERATORS)[28 % 5], 28).trajectory
+    clip = traj.slice(0, 330)  # the benchmark run up to just past the old drop (frame 321)
+    new = simulate(clip, SimConfig())
+    old = simulate(clip, SimConfig(tracking=TrackingConfig(grip_force_floor_n=None)))
+    assert new.success, new.metrics["failed_at_frame"]
+    assert not old.success
+    assert new.metrics["object_pos_err_max_m"] < 0.03
+    assert new.wrench[-10:, 2].mean() > 0.5 * new.metrics["mass_kg"] * GRAVITY

@@ -41,7 +41,7 @@ from dexcanvas_core.sim.forces import (
     finish_frame,
     read_contacts,
 )
-from dexcanvas_core.sim.grip import carried_load, squeeze_offsets
+from dexcanvas_core.sim.grip import carried_load, contact_keeping_force, squeeze_offsets
 from dexcanvas_core.sim.hand import FINGER_HINGES, HAND_JOINTS
 from dexcanvas_core.sim.reference import Reference
 
@@ -64,6 +64,18 @@ class TrackingConfig:
     grip: bool = True
     """Contact-aware grip offsets (:mod:`dexcanvas_core.sim.grip`)."""
     grip_force_min_n: float = 4.0
+    """Contact-keeping pad force [N] (before the weight-carrying share), for objects heavy
+    enough; lighter ones get less (``grip_force_floor_n``)."""
+    grip_force_floor_n: float | None = 2.0
+    """Light objects: the contact-keeping force is ``grip_force_weight_k`` times the object's
+    weight, clipped to [``grip_force_floor_n``, ``grip_force_min_n``] (people grip a light
+    object more gently; :func:`~dexcanvas_core.sim.grip.contact_keeping_force`). ``None``:
+    ``grip_force_min_n`` for every object (the earlier model: 4 N per pad on an 85 g cylinder
+    pinched from above pressed it down with 7 × its weight, and it slid out of the pinch at
+    lift-off)."""
+    grip_force_weight_k: float = 2.7
+    """Light objects' contact-keeping force in object weights (2.7 · m·g reaches the 4 N of
+    ``grip_force_min_n`` at 150 g, the lightest object 4 N was measured to hold)."""
     grip_safety: float = 3.0
     """Grip force per finger: carry this many times the object's weight by friction."""
     grip_load_lead_s: float | None = 0.2
@@ -217,7 +229,11 @@ class TrackingEnv:
         if self.cfg.grip:
             offsets, self.grip_force = squeeze_offsets(
                 scene, self.ctrl_ref, ref.object_pos, ref.object_quat, self.tip_weight,
-                force_min_n=self.cfg.grip_force_min_n, safety=self.cfg.grip_safety,
+                force_min_n=contact_keeping_force(
+                    scene.mass_kg, self.cfg.grip_force_min_n, self.cfg.grip_force_floor_n,
+                    self.cfg.grip_force_weight_k,
+                ),
+                safety=self.cfg.grip_safety,
                 friction=float(m.geom_friction[scene.object_geoms, 0].max()), load=self.load,
                 additive=self.cfg.grip_additive,
             )  # fmt: skip
