@@ -151,19 +151,34 @@ class BenchConfig:
 
 
 def tracking_config(cfg: BenchConfig):
-    """The runs' ``TrackingConfig``: the defaults with ``cfg.tracking``'s overrides."""
+    """The runs' ``TrackingConfig``: the defaults with ``cfg.tracking``'s overrides (names
+    checked, numbers for numeric fields, booleans for flags; ``None`` where the field allows
+    it). Range checks stay with the code that uses the field."""
     from dexcanvas_core.errors import ValidationError
     from dexcanvas_core.sim.tracker import TrackingConfig
 
-    names = {f.name for f in dataclasses.fields(TrackingConfig)}
-    bad = [k for k, _ in cfg.tracking if k not in names]
+    fields = {f.name: f for f in dataclasses.fields(TrackingConfig)}
+    bad = [k for k, _ in cfg.tracking if k not in fields]
     if bad:
         raise ValidationError(
             f"unknown TrackingConfig field(s) {', '.join(bad)}; available: "
-            f"{', '.join(sorted(names))}",
+            f"{', '.join(sorted(fields))}",
             field="tracking",
         )
-    return dataclasses.replace(TrackingConfig(), **dict(cfg.tracking))
+    defaults = TrackingConfig()
+    for k, v in cfg.tracking:
+        d = getattr(defaults, k)
+        optional = "None" in str(fields[k].type)
+        if v is None and optional:
+            continue
+        number = isinstance(v, (int, float)) and not isinstance(v, bool)
+        if isinstance(d, bool) and not isinstance(v, bool):
+            raise ValidationError(f"{k} takes True or False, got {v!r}", field="tracking")
+        if isinstance(d, (int, float)) and not isinstance(d, bool) and not number:
+            raise ValidationError(
+                f"{k} takes a number{' or None' if optional else ''}, got {v!r}", field="tracking"
+            )
+    return dataclasses.replace(defaults, **dict(cfg.tracking))
 
 
 def parse_override(text: str) -> tuple[str, object]:

@@ -1,0 +1,49 @@
+"""``benchmarks/force_pipeline.py --set FIELD=VALUE``: ablation overrides of the tracker."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+from force_pipeline import BenchConfig, parse_override, tracking_config
+
+from dexcanvas_core.errors import ValidationError
+
+
+def test_override_parses_python_literals():
+    assert parse_override("grip_force_min_n=2") == ("grip_force_min_n", 2)
+    assert parse_override(" grip = False ") == ("grip", False)
+    assert parse_override("grip_force_floor_n=None") == ("grip_force_floor_n", None)
+    assert parse_override("grip_load_clear_m=(0.001, 0.004)") == (
+        "grip_load_clear_m",
+        (0.001, 0.004),
+    )
+    for bad in ("grip_force_min_n", "=2", "grip_force_min_n=two"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            parse_override(bad)
+
+
+def test_overrides_reach_the_tracking_config():
+    cfg = BenchConfig(tracking=(("grip_force_min_n", 2), ("grip_force_floor_n", None)))
+    tc = tracking_config(cfg)
+    assert tc.grip_force_min_n == 2 and tc.grip_force_floor_n is None
+    assert tracking_config(BenchConfig()).grip_force_floor_n == 2.0  # the defaults otherwise
+
+
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        (("grip_force_mn_n", 2.0), "unknown TrackingConfig field"),
+        (("grip_force_min_n", "2"), "takes a number"),
+        (("grip_force_min_n", None), "takes a number"),
+        (("grip", 1), "True or False"),
+    ],
+)
+def test_bad_overrides_fail_before_any_run(override, message):
+    with pytest.raises(ValidationError, match=message):
+        BenchConfig(tracking=(override,)).validate()
