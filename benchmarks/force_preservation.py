@@ -24,8 +24,9 @@ Per hand (``--hands``, default every registered hand; a hand skips pairs it cann
 * **(c) + contacts** — default ``RetargetConfig`` (contact preservation, the 10 mm grip squeeze),
   re-simulated on ``q_command``; contacts inferred from the demonstration's geometry, as the
   kinematic product does without the force pipeline;
-* **(d) + forces** — ``force_matching=True`` on the force-annotated demonstration (contacts from
-  its records, the human's per-finger forces → force-distribution QP → ``K⁻¹Jᵀf`` offsets),
+* **(d) + forces** — ``force_matching=True`` on the force-annotated demonstration (contacts
+  inferred from its geometry as in (c), the human's per-finger forces from its records →
+  force-distribution QP → ``K⁻¹Jᵀf`` offsets),
   re-simulated on ``q_command`` with stiff contacts (``retarget.run.FORCE_CONTACT_TIMECONST``);
   (a)–(c) use the re-simulation's default contacts;
 * **(e) + refinement** — (d), and where (d)'s replay fails, ``retarget.refine.refine``: the
