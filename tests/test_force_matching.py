@@ -188,6 +188,35 @@ def test_retargeter_matches_the_human_object_force(human_with_forces):
     assert dq[touching].min() > 1e-4
 
 
+def test_contact_flags_come_from_the_captured_geometry_unless_asked(human_with_forces):
+    """By default a force-annotated demonstration gets the same contact targets as the bare
+    capture (the records only supply forces); ``contacts_from="records"`` takes the flags from
+    the force pipeline's records, where the simulated hand touched."""
+    import dataclasses
+
+    from dexcanvas_core.demos.geometry import object_geometry
+    from retarget.hands import get_hand
+    from retarget.retargeter import RetargetConfig, Retargeter
+
+    traj = human_with_forces.slice(250, 420)
+    bare = dataclasses.replace(traj, contacts=None)
+    hand, geom = get_hand("allegro"), object_geometry("cube2")
+    rt = Retargeter(hand, geom, RetargetConfig())
+    a, b = rt.human_targets(traj), rt.human_targets(bare)
+    assert a["contact_active"].sum() > 100
+    for k in ("contact_active", "contact_part", "contact_points"):
+        np.testing.assert_array_equal(a[k], b[k])
+    rec = Retargeter(hand, geom, RetargetConfig(contacts_from="records"))
+    c = rec.human_targets(traj)
+    parts = rec._parts_from_records(traj)  # (T, F, 3)
+    assert c["contact_active"].sum() > 100
+    assert not (c["contact_active"] & ~parts.any(-1)).any()  # only where a record says so
+    assert c["contact_active"][parts[..., 0]].all()  # every recorded fingertip contact
+    assert (c["contact_active"] != a["contact_active"]).any()  # the two sources differ here
+    with pytest.raises(RetargetError, match="contacts_from"):
+        RetargetConfig(contacts_from="sim").validate()
+
+
 def test_force_matching_without_forces_says_what_to_do():
     from dexcanvas_core.demos import generate_demo
     from dexcanvas_core.demos.geometry import object_geometry
