@@ -45,6 +45,7 @@ from retarget.limits import (
     CollisionLimit,
     ContactSweep,
     CouplingLimit,
+    FrameSpeedLimit,
     JointLimit,
     VelocityLimit,
 )
@@ -127,6 +128,15 @@ class RetargetConfig:
     penetration margin a finger may rest on the table in the kinematic solution; re-simulated,
     the grip squeeze then presses it into the table instead of the object (Shadow's thumb on
     a lateral pinch of cube2)."""
+    noncontact_clearance: float = 0.002
+    """Distance [m] a robot finger link keeps from the object on frames where the human's
+    corresponding phalanx does not touch it (0: only non-penetration). Contact preservation
+    both ways: keypoint targets near the surface can press a robot link the human kept clear
+    onto the object (Shadow on generated cube2/tripod, operator2: the ring finger's middle
+    link 1 mm into the cube, and in re-simulation the grasp was thumb–middle–ring instead of
+    the human's thumb–index–middle). Pinocchio backend only. Measured with
+    benchmarks/retarget_speed_quality.py (3 hands × 20 pairs, surface keypoint scaling),
+    0 → 2 mm: strict re-sim success 42 → 47 %, finger–finger penetration 1.37 → 1.01 mm."""
     collision_distmax: float = 0.03
     """Hand–object pairs farther than this [m] are left out of an iterate."""
     use_self_collision: bool = True
@@ -155,8 +165,36 @@ class RetargetConfig:
     """Human fingertip keypoint–surface distance [m] below which a fingertip is in contact
     (inferred when the trajectory has no contact records). MANO's tip keypoint sits at the end
     of the finger, about one pad radius (7–9 mm) from a surface the pad touches."""
+    keypoint_scaling: str = "surface"
+    """How the human keypoints are scaled to the robot hand's size (``_scaled_keypoints``):
+    ``uniform`` — about the object's centre by the hand scale; ``surface`` — the same, but a
+    keypoint's distance to the object's surface is a robot-sized finger radius plus the
+    human's gap near the object (touching keypoints stay touching), scaled fully from
+    ``scale_blend_m`` out. Measured with benchmarks/retarget_speed_quality.py (Shadow,
+    Allegro, LEAP × 20 pairs; strict re-sim success, keypoint / contact error): uniform 47 %,
+    19.1 / 1.76 mm; surface 42 %, 18.7 / 1.34 mm (robot links pressed onto the object where
+    the human's kept a gap); surface with ``noncontact_clearance`` (the default) 47 %,
+    18.7 / 1.72 mm, deepest penetration 1.50 → 1.19 mm. dex-retargeting fed the same targets:
+    5 % with uniform, 15 % with surface."""
+    finger_radius_m: float = 0.008
+    """``keypoint_scaling="surface"``: the human finger's radius [m] about its keypoints: a
+    keypoint this close to the surface touches it (MANO's fingertip keypoint sits about one
+    pad radius, 7–9 mm, from a surface the pad touches; ``contact_threshold``)."""
+    scale_blend_m: float = 0.05
+    """``keypoint_scaling="surface"``: gap [m] between a human finger and the object's surface
+    from which the gap gets the full hand scale."""
     max_joint_speed: float = 20.0
-    """Velocity bound [rad/s or m/s] per joint."""
+    """Velocity bound [rad/s or m/s] per joint and QP iterate."""
+    max_wrist_speed: float = 1.5
+    """Bound [m/s] on the wrist's translation from one frame's solution to the next, over all
+    of the frame's iterations (``inf``: none). The contact terms outweigh the wrist's, so a
+    contact switching on can pull the wrist several centimetres in one frame, and back the
+    next (Shadow on generated cube2/tripod, operator2: 5.1 cm down and 3.4 cm up at 120 fps,
+    6.5 m/s, while the human wrist moved 0.01 m/s); the robot's wrist servo cannot follow
+    that and the re-simulated hand lags up to 4.9 cm. Human wrist speeds in grasping stay
+    below ~1.5 m/s. The bound is per axis. Measured with benchmarks/retarget_speed_quality.py
+    (3 hands × 20 pairs, uniform keypoint scaling), none → 1.5 m/s: strict re-sim success
+    47 → 47 %, keypoint error 19.17 → 19.12 mm; 0.75 m/s: 43 %."""
     squeeze_depth: float = 0.01
     """``grip="depth"``: where the human touches the object, the robot's position *command*
     (``q_command``) presses each contacting finger this far [m] into the surface (along the
@@ -230,6 +268,7 @@ class RetargetConfig:
                 raise RetargetError(f"weight {k} must be finite and >= 0, got {v}")
         for k in (
             "penetration_margin",
+            "noncontact_clearance",
             "self_collision_margin",
             "table_clearance",
             "contact_ramp_s",
@@ -241,12 +280,24 @@ class RetargetConfig:
             raise RetargetError(
                 f"unknown contacts_from {self.contacts_from!r}; use geometry or records"
             )
+        if self.keypoint_scaling not in ("surface", "uniform"):
+            raise RetargetError(
+                f"unknown keypoint_scaling {self.keypoint_scaling!r}; use surface or uniform"
+            )
+        if not (np.isfinite(self.scale_blend_m) and self.scale_blend_m > 0):
+            raise RetargetError(
+                f"scale_blend_m must be finite and > 0 [m], got {self.scale_blend_m}"
+            )
         if self.grip not in ("wrench", "depth"):
             raise RetargetError(f"unknown grip {self.grip!r}; use wrench or depth")
         for k in ("grip_force_n", "grip_lead_s"):
             v = getattr(self, k)
             if not (np.isfinite(v) and v >= 0):
                 raise RetargetError(f"{k} must be finite and >= 0, got {v}")
+        if not (self.max_wrist_speed > 0):  # inf allowed: no bound
+            raise RetargetError(
+                f"max_wrist_speed must be > 0 [m/s] (inf: none), got {self.max_wrist_speed}"
+            )
         for k in ("collision_distmax", "self_collision_distmax"):
             v = getattr(self, k)
             if not (np.isfinite(v) and v > 0):
@@ -448,6 +499,21 @@ class Retargeter:
             if self.cfg.use_collision:
                 self.collision = self.distance_query
                 self.limits.append(self.collision)
+        self._pair_parts = None  # (pairs, F·3): which finger part each hand-object pair's geom is
+        if self.distance_query is not None and self.contacts is not None:
+            F = len(self.contacts.part_geoms)
+            part_of = {}
+            for f, parts in enumerate(self.contacts.part_geoms):
+                for k, geoms in enumerate(parts):
+                    for g in geoms:
+                        part_of.setdefault(g, []).append(f * 3 + k)
+            obj = set(self.scene.object_geoms)
+            mask = np.zeros((len(pairs_geom), F * 3), bool)
+            for i, (a, b) in enumerate(pairs_geom):
+                if b in obj:
+                    mask[i, part_of.get(a, [])] = True
+            self._pair_parts = mask
+            self._base_margins = self.distance_query.pair_margins.copy()
         # Self-collision: the same query for metrics, the limit when use_self_collision.
         self.self_pairs = _geom_pairs(m, hand.self_collision_pairs())
         self.self_collision = None
@@ -518,15 +584,11 @@ class Retargeter:
         if not np.all(np.isfinite(h_kp)):
             raise RetargetError(f"trajectory {traj.uuid}: human keypoints contain NaN")
         R_wrist = aa_to_matrix(h.global_rot_aa.astype(np.float64))
-        s = self.scale
-        if self.geometry is not None and traj.objects:
-            centre = traj.object.pos.astype(np.float64)
-        else:
-            centre = h_kp[:, 0]
-        wrist_p = centre + s * (h_kp[:, 0] - centre)
-        kp = centre[:, None] + s * (h_kp[:, self.kp_index] - centre[:, None])
+        scaled = self._scaled_keypoints(traj, h_kp)  # (T, 21, 3)
+        wrist_p = scaled[:, 0]
+        kp = scaled[:, self.kp_index]
         vec = (
-            np.stack([s * (h_kp[:, a] - h_kp[:, b]) for a, b in self.vec_human], axis=1)
+            np.stack([scaled[:, a] - scaled[:, b] for a, b in self.vec_human], axis=1)
             if self.vec_human
             else np.zeros((traj.num_frames, 0, 3))
         )
@@ -534,6 +596,7 @@ class Retargeter:
         T, F = traj.num_frames, len(self.tip_sites)
         active = np.zeros((T, F), bool)
         parts = np.zeros((T, F), int)
+        by_part = np.zeros((T, F, 3), bool)
         points = np.zeros((T, F, 3))
         normals = np.zeros((T, F, 3))
         if self.geometry is not None and traj.objects:
@@ -581,9 +644,63 @@ class Retargeter:
             normals = np.einsum("tij,tfj->tfi", R_obj, n_obj)
         out.update(
             contact_active=active, contact_points=points, contact_normals=normals,
-            contact_part=parts,
+            contact_part=parts, contact_by_part=by_part,
         )  # fmt: skip
         return out
+
+    def _scaled_keypoints(self, traj: Trajectory, h_kp: np.ndarray) -> np.ndarray:
+        """The human keypoints ``h_kp`` (T, 21, 3) [m, world] scaled to the robot hand's size.
+
+        Without an object: about the wrist by ``scale``. With one, ``keypoint_scaling``:
+
+        * ``uniform`` — about the object's centre by ``scale``;
+        * ``surface`` — the same, then each keypoint moved along the surface normal until its
+          distance to the surface is that of a robot-sized finger with the human's gap: with
+          ``ρ = finger_radius_m`` and the human keypoint's distance ``d``, ``scale·d`` within
+          ``ρ`` (touching), ``scale·ρ + (d − ρ)·g(d)`` beyond, the gap's scale ``g`` going
+          from 1 to ``scale`` over ``scale_blend_m`` (smoothstep; ``scale·d`` far away). Across
+          the surface the keypoints keep the robot hand's spread (its fingers are wider
+          apart); towards it, a keypoint that touches stays touching and one that keeps a gap
+          keeps it.
+
+        Scaled uniformly, a fingertip on the object is pushed ``(scale − 1)·r`` off the surface
+        (``r`` its distance from the centre: ~9 mm on a 5 cm cube for Shadow's 1.37), so the
+        keypoint and contact targets disagree on every contact frame and a contact switching on
+        pulls the finger, and the wrist with it, across the gap (Shadow on generated
+        cube2/tripod, operator2: the thumb's contact target 21.8 mm from its tip at onset, the
+        wrist dived 6.8 cm and came back while the human's stood still; with ``surface``
+        2.2 mm, no dive)."""
+        s = self.scale
+        if self.geometry is None or not traj.objects:
+            c = h_kp[:, :1]
+            return c + s * (h_kp - c)
+        c = traj.object.pos.astype(np.float64)[:, None]  # (T, 1, 3)
+        u = c + s * (h_kp - c)
+        if self.cfg.keypoint_scaling == "uniform":
+            return u
+        R_obj = aa_to_matrix(traj.object.rot_aa.astype(np.float64))  # (T, 3, 3) object → world
+        d, _ = self.geometry.sdf_and_normal(np.einsum("tji,tkj->tki", R_obj, h_kp - c))
+        d_u, n_u = self.geometry.sdf_and_normal(np.einsum("tji,tkj->tki", R_obj, u - c))
+        rho = self.cfg.finger_radius_m
+        x = np.clip((d - rho) / self.cfg.scale_blend_m, 0.0, 1.0)
+        gap_scale = 1.0 + (s - 1.0) * x * x * (3.0 - 2.0 * x)
+        d_target = np.where(d < rho, s * d, s * rho + (d - rho) * gap_scale)  # (T, 21) [m]
+        n_world = np.einsum("tij,tkj->tki", R_obj, n_u)
+        return u - (d_u - d_target)[..., None] * n_world
+
+    def _frame_margins(self, by_part: np.ndarray) -> np.ndarray:
+        """Per hand–object pair, the margin [m] of its non-penetration row this frame: the
+        penetration margin where the pair's hand geom stands for a phalanx the human touches
+        the object with (``by_part`` (F, 3)), or that is no finger part (palm), else the
+        clearance ``−noncontact_clearance``; the table pairs keep theirs."""
+        margins = self._base_margins.copy()
+        if self.cfg.noncontact_clearance <= 0:
+            return margins
+        mask = self._pair_parts
+        allowed = (mask & by_part.reshape(-1)[None]).any(axis=1)
+        clear = mask.any(axis=1) & ~allowed
+        margins[clear] = -self.cfg.noncontact_clearance
+        return margins
 
     def _segment_rows(self, k: int) -> np.ndarray:
         """(F, 2) MANO21 rows of each finger's phalanx ``k`` (0: distal, 1: middle,
@@ -650,12 +767,14 @@ class Retargeter:
                 self.contacts.set_contacts(
                     active, tg["contact_points"][t], tg["contact_part"][t], ramp[t]
                 )
+            if self.collision is not None and self._pair_parts is not None:
+                self.collision.pair_margins = self._frame_margins(tg["contact_by_part"][t])
             n_it = self.cfg.first_frame_iterations if t == 0 else self.cfg.iterations
             t0 = time.perf_counter()
             q0 = q
             if t >= 2 and self.cfg.warm_start_extrapolate:
                 q0 = self._warm_start(Q[t - 2 : t], wq[t - 1 : t + 1], tg["contact_active"], t)
-            q = self._solve_frame(q0, n_it, traj.timestamp, t)
+            q = self._solve_frame(q0, n_it, traj.timestamp, t, q_prev=q if t > 0 else None)
             if fm is not None:
                 Qc[t] = q + self._force_squeeze(q, t, tg, fm)
             else:
@@ -665,6 +784,8 @@ class Retargeter:
             Q[t] = q
             if progress is not None:
                 progress(t + 1, T)
+        if self.collision is not None and self._pair_parts is not None:
+            self.collision.pair_margins = self._base_margins.copy()
         m = self.measure(traj, Q, tg)
         return RobotTrajectory(
             hand=self.hand.name,
@@ -919,13 +1040,23 @@ class Retargeter:
         return objs
 
     def _solve_frame(
-        self, q: np.ndarray, iterations: int, timestamp: np.ndarray, t: int
+        self,
+        q: np.ndarray,
+        iterations: int,
+        timestamp: np.ndarray,
+        t: int,
+        q_prev: np.ndarray | None = None,
     ) -> np.ndarray:
         dt = float(timestamp[t] - timestamp[t - 1]) if t > 0 else 1.0 / 30.0
         if self._mink is not None:
             return self._mink.solve(q, iterations)
+        frame = []
+        if q_prev is not None and np.isfinite(self.cfg.max_wrist_speed):
+            v = np.full(self.nq, np.inf)
+            v[:3] = self.cfg.max_wrist_speed
+            frame = [FrameSpeedLimit(q_prev, v)]
         vel = VelocityLimit(self.cfg.max_joint_speed)
-        limits = [*self.limits, vel] if t > 0 else self.limits
+        limits = [*self.limits, vel, *frame] if t > 0 else self.limits
         objectives = self._objectives()
         extra = self.cfg.max_feasibility_iterations
         i = fixes = 0
@@ -953,7 +1084,11 @@ class Retargeter:
             if fixes >= extra or not self._penetrates(q):
                 return q
             fixes += 1
-            limits = [*self.limits, VelocityLimit(self.cfg.max_joint_speed * 0.25**fixes)]
+            limits = [
+                *self.limits,
+                VelocityLimit(self.cfg.max_joint_speed * 0.25**fixes),
+                *frame,
+            ]
 
     def _solve_step(self, state: RobotState, objectives, limits) -> np.ndarray:
         """One QP step. If it is infeasible because a penetrating pair cannot back out as

@@ -6,7 +6,13 @@ import pytest
 from test_kinematics import TOY
 
 from retarget.kinematics import PinocchioKinematics
-from retarget.limits import CollisionLimit, CouplingLimit, JointLimit, VelocityLimit
+from retarget.limits import (
+    CollisionLimit,
+    CouplingLimit,
+    FrameSpeedLimit,
+    JointLimit,
+    VelocityLimit,
+)
 from retarget.objectives import (
     ContactObjective,
     KeypointObjective,
@@ -125,6 +131,34 @@ def test_joint_and_velocity_limits_bound_the_step(kin):
     vmax = 0.5
     dq = solve_qp(build_qp(s, [kp], [VelocityLimit(vmax)]))
     assert np.abs(dq).max() <= vmax * s.dt + 1e-9
+
+
+def test_frame_speed_limit_bounds_the_motion_since_the_last_frame(kin):
+    """Iterates pulled hard towards an unreachable target stay within ``v_max·dt`` of the
+    previous frame's solution on the bounded joints, however many steps they take; the
+    others move freely; a start outside the band only steps back towards it."""
+    kp = KeypointObjective(SITES)
+    kp.set_targets(np.full((2, 3), 5.0))
+    q_prev = np.zeros(kin.nq)
+    v = np.full(kin.nq, np.inf)
+    v[0] = 0.5
+    lim = FrameSpeedLimit(q_prev, v)
+    q = q_prev.copy()
+    free = 0.0
+    for _ in range(5):
+        s = _state(kin, q)
+        q = q + solve_qp(build_qp(s, [kp], [lim]))
+        assert abs(q[0] - q_prev[0]) <= v[0] * s.dt + 1e-9
+        free = max(free, np.abs(q[1:] - q_prev[1:]).max())
+    assert abs(q[0] - q_prev[0]) == pytest.approx(v[0] * s.dt)  # the bound is what stops it
+    assert free > 10 * v[0] * s.dt  # the unbounded joints are not held back
+    q_out = q_prev.copy()
+    q_out[0] = 3 * v[0] * s.dt
+    lb, ub = lim.bounds(_state(kin, q_out))
+    assert lb[0] == pytest.approx(-4 * v[0] * s.dt) and ub[0] == 0.0  # back, not further out
+    assert np.isinf(lb[1:]).all() and np.isinf(ub[1:]).all()
+    with pytest.raises(ValueError, match="one per joint"):
+        FrameSpeedLimit(q_prev, v[:2])
 
 
 COUPLED = """

@@ -12,9 +12,10 @@ from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.example import example_trajectories
 from dexcanvas_core.io import write_dataset
 from dexcanvas_core.keypoints import MANO21
-from dexcanvas_core.rotations import matrix_to_aa
+from dexcanvas_core.rotations import aa_to_matrix, matrix_to_aa
 from dexcanvas_core.trajectory import HandTrack, Trajectory
 from retarget.cli import main
+from retarget.errors import RetargetError
 from retarget.hands import get_hand
 from retarget.hands.base import WRIST_SITE
 from retarget.kinematics import MujocoKinematics, PinocchioKinematics
@@ -265,8 +266,6 @@ def test_keypoint_only_entry_point(demo):
     assert out.q.shape[0] == 20 and np.isfinite(out.keypoint_err).all()
     bad = kp.copy()
     bad[3, 4, 1] = np.nan
-    from retarget.errors import RetargetError
-
     with pytest.raises(RetargetError, match="NaN or inf \\(first at frame 3\\)"):
         keypoints_to_trajectory(bad, 120.0)
     with pytest.raises(RetargetError, match=r"shape \(T, 21, 3\)"):
@@ -374,8 +373,6 @@ def test_link_contacts_hold_a_lateral_pinch_on_the_thumb_pad():
 
 
 def test_contact_parts_are_validated():
-    from retarget.errors import RetargetError
-
     rt = Retargeter(get_hand("allegro"), object_geometry("cube2"))
     F = len(rt.tip_sites)
     with pytest.raises(RetargetError, match="parts"):
@@ -393,20 +390,83 @@ def test_contact_ramp_rises_and_falls():
     assert r[5, 1] == pytest.approx(1 / 3) and (r[~active] == 1).all()
 
 
-def test_contact_ramp_keeps_onsets_from_snapping_the_wrist():
+def test_onsets_do_not_snap_the_wrist():
     """Shadow on the built-in cylinder1/lateral_tripod: contacts switched on and off at full
-    weight move the retargeted wrist at up to 4.1 m/s (the human's at most 0.7 m/s); with a
-    0.1 s ramp below 2.5 m/s."""
+    weight, with nothing else in the way, move the retargeted wrist at up to 4.1 m/s (the
+    human's at most 0.7 m/s); a 0.1 s contact ramp keeps it below 2.5 m/s, and the default
+    frame-to-frame bound (``max_wrist_speed``) at 1.5 m/s."""
     from dexcanvas_core.loaders.selection import load_demonstration
 
     traj = load_demonstration("cylinder1/lateral_tripod")
     geom = object_geometry(traj.object.name)
     peak = {}
-    for ramp in (0.0, 0.1):
-        rt = Retargeter(get_hand("shadow"), geom, RetargetConfig(contact_ramp_s=ramp))
+    for name, cfg in {
+        "free": RetargetConfig(max_wrist_speed=np.inf, keypoint_scaling="uniform"),
+        "ramp": RetargetConfig(
+            max_wrist_speed=np.inf, keypoint_scaling="uniform", contact_ramp_s=0.1
+        ),
+        "default": RetargetConfig(),
+    }.items():
+        rt = Retargeter(get_hand("shadow"), geom, cfg)
         q = rt.retarget(traj).q
-        peak[ramp] = (np.linalg.norm(np.diff(q[1:, :3], axis=0), axis=1) * traj.fps).max()
-    assert peak[0.1] < 2.5 < peak[0.0]
+        peak[name] = (np.linalg.norm(np.diff(q[1:, :3], axis=0), axis=1) * traj.fps).max()
+    human = np.linalg.norm(np.diff(traj.hand.global_pos, axis=0), axis=1) * traj.fps
+    assert human.max() < 1.0  # the bound, not the human's own speed, is what is measured
+    assert peak["ramp"] < 2.5 < peak["free"]
+    # The bound is per axis (box bounds): |v| ≤ √3 · 1.5 m/s at most.
+    assert peak["default"] <= np.sqrt(3) * 1.5 + 1e-6
+    assert peak["default"] < 0.6 * peak["free"]
+
+
+def test_surface_scaling_keeps_touching_keypoints_touching():
+    """``keypoint_scaling="surface"``: each target is the uniformly scaled keypoint moved along
+    the surface normal until its distance to the surface is the robot-sized finger radius plus
+    the human's gap (``s·ρ + (d − ρ)``) near the object, ``s·d`` from ``scale_blend_m`` out
+    and within the finger radius; ``uniform`` is the plain scaling about the centre."""
+    demo = next(t for t in example_trajectories(seed=0) if t.scene == "cube2")  # reach + grasp
+    geom = object_geometry("cube2")
+    rt = Retargeter(get_hand("shadow"), geom)
+    uni = Retargeter(get_hand("shadow"), geom, RetargetConfig(keypoint_scaling="uniform"))
+    s, blend, rho = rt.scale, rt.cfg.scale_blend_m, rt.cfg.finger_radius_m
+    assert s > 1.2 and rt.cfg.keypoint_scaling == "surface"
+    h_kp = demo.hand.joint_pos.astype(np.float64)
+    c = demo.object.pos.astype(np.float64)[:, None]
+    R = np.stack([aa_to_matrix(a) for a in demo.object.rot_aa.astype(np.float64)])
+
+    def sdf(p):
+        return geom.sdf_and_normal(np.einsum("tji,tkj->tki", R, p - c))
+
+    u = uni._scaled_keypoints(demo, h_kp)
+    np.testing.assert_allclose(u, c + s * (h_kp - c))
+    out = rt._scaled_keypoints(demo, h_kp)
+    d, _ = sdf(h_kp)
+    d_out, _ = sdf(out)
+    d_u, n_u = sdf(u)
+    # Moved along the surface normal at the scaled keypoint only (no sideways component).
+    n_world = np.einsum("tij,tkj->tki", R, n_u)
+    move = u - out
+    along = np.einsum("tki,tki->tk", move, n_world)[..., None] * n_world
+    np.testing.assert_allclose(move - along, 0.0, atol=1e-9)
+    touch = (d >= 0) & (d < rho)
+    gap = (d >= rho) & (d < rho + 0.004)  # smoothstep still ≤ 2 % of the way to s
+    far = d >= rho + blend
+    assert touch.sum() > 20 and gap.sum() > 20 and far.sum() > 100  # the demo has all three
+    # On a box's faces the move lands exactly at the asked distance (not across an edge).
+    face = np.abs(d_out - d_u) < 0.5 * np.abs(d_u)
+    np.testing.assert_allclose(d_out[touch & face], s * d[touch & face], atol=1e-3)
+    np.testing.assert_allclose(d_out[gap & face], s * rho + d[gap & face] - rho, atol=1e-3)
+    np.testing.assert_allclose(d_out[far & face], s * d[far & face], atol=1e-3)
+    # Uniform scaling pushed the touching keypoints (s − 1)·r off: farther than this.
+    assert (d_u[touch] - d_out[touch]).mean() > 0.005
+    tg = rt.human_targets(demo)  # the wrist, keypoint and vector targets are these points
+    np.testing.assert_allclose(tg["wrist_p"], out[:, 0])
+    np.testing.assert_allclose(tg["keypoints"], out[:, rt.kp_index])
+    a, b = rt.vec_human[0]
+    np.testing.assert_allclose(tg["vectors"][:, 0], out[:, a] - out[:, b])
+    with pytest.raises(RetargetError, match="keypoint_scaling"):
+        RetargetConfig(keypoint_scaling="centre").validate()
+    with pytest.raises(RetargetError, match="max_wrist_speed"):
+        RetargetConfig(max_wrist_speed=0.0).validate()
 
 
 def test_predicted_warm_start_takes_fewer_steps_without_overshooting():
@@ -435,3 +495,51 @@ def test_predicted_warm_start_takes_fewer_steps_without_overshooting():
     assert out[True][0] < 0.85 * out[False][0]
     assert out[True][1] < out[False][1] + 5e-4
     assert out[True][2] < 1.1 * out[False][2]
+
+
+def test_links_the_human_keeps_clear_stay_clear(demo):
+    """Where the human's phalanx does not touch the object, the robot link standing for it
+    keeps ``noncontact_clearance`` from it (to the linearisation's accuracy); where it touches,
+    the plain non-penetration margin applies. Without the clearance some such link comes
+    closer on this demonstration."""
+    geom = object_geometry("cube2")
+
+    def closest_clear(rt, r, tg):
+        """Per frame, the smallest distance [m] of a robot link whose human phalanx is clear."""
+        m = rt.scene.model
+        part_of = {}
+        for f, parts in enumerate(rt.contacts.part_geoms):
+            for k, gs in enumerate(parts):
+                for g in gs:
+                    part_of.setdefault(g, []).append((f, k))
+        obj = set(rt.scene.object_geoms)
+        out = np.full(demo.num_frames, np.inf)
+        for t in range(demo.num_frames):
+            rt.scene.set_object_pose(demo.object.pos[t], demo.object.rot_aa[t])
+            for ga, gb, d, _pa, _pb in rt.distance_query.distances(r.q[t]):
+                fk = part_of.get(ga)
+                if gb in obj and fk and not any(tg["contact_by_part"][t, f, k] for f, k in fk):
+                    out[t] = min(out[t], d)
+        assert m.ngeom > 0
+        return out
+
+    rt = Retargeter(get_hand("shadow"), geom)
+    tg = rt.human_targets(demo)
+    assert tg["contact_by_part"].any() and not tg["contact_by_part"].all()
+    r = rt.retarget(demo)
+    d_on = closest_clear(rt, r, tg)
+    clear = rt.cfg.noncontact_clearance
+    assert clear > 0 and d_on.min() > clear - 1e-3, d_on.min()
+    np.testing.assert_array_equal(rt.collision.pair_margins, rt._base_margins)  # restored
+    off = Retargeter(get_hand("shadow"), geom, RetargetConfig(noncontact_clearance=0.0))
+    d_off = closest_clear(off, off.retarget(demo), tg)
+    assert d_off.min() < clear - 1e-3 < d_on.min()
+    # The margins themselves: touching parts and the palm keep the penetration margin.
+    by_part = np.zeros_like(tg["contact_by_part"][0])
+    m0 = rt._frame_margins(by_part)
+    is_part = rt._pair_parts.any(axis=1)
+    table = rt._base_margins < 0
+    assert (m0[is_part & ~table] == -clear).all()
+    assert (m0[~is_part] == rt._base_margins[~is_part]).all()
+    by_part[:] = True
+    np.testing.assert_array_equal(rt._frame_margins(by_part), rt._base_margins)

@@ -228,11 +228,14 @@ def test_recorded_resimulation_is_the_run(scene_inputs):
     # Same simulation, same inputs: the very object trajectory retarget run stored.
     np.testing.assert_array_equal(sim.result.object_pos_sim, run.arrays["object_pos_sim"])
     assert sim.qpos.shape == run.arrays["q"].shape and np.isfinite(sim.qpos).all()
-    # The simulated hand follows its command: wrist within 3 cm of the retargeted wrist (the
-    # servo lags up to ~2 cm where a contact onset moves the retargeted wrist at ~1 m/s).
+    # The simulated hand follows its command: wrist within 3 cm of the retargeted wrist
+    # (measured 1.2 cm; 4.9 cm when uniformly scaled keypoints left the thumb 2 cm short of
+    # its contact target at onset and the retargeted wrist dived 6.8 cm to close the gap).
     assert np.abs(sim.qpos[:, :3] - run.arrays["q"][:, :3]).max() < 0.03
     groups = {FORCE_GROUPS[g] for g in sim.contacts.group[sim.contacts.valid]}
-    assert {"thumb", "index"} <= groups, groups
+    # The thumb against a finger the human's tripod used (which one carries the cube is the
+    # grip plan's choice: here ~2.9 N on the thumb and the middle finger, ≤ 0.3 N on the index).
+    assert "thumb" in groups and groups & {"index", "middle"}, groups
     # Forces are those of the hand on the object: they push into it (towards its centre).
     t, k = np.nonzero(sim.contacts.valid)
     inward = run.arrays["object_pos_sim"][t] - sim.contacts.pos_world[t, k]

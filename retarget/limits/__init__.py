@@ -3,12 +3,13 @@
 from retarget.limits.base import Limit
 from retarget.limits.collision import CollisionLimit, ContactSweep
 from retarget.limits.coupling import CouplingLimit
-from retarget.limits.joints import JointLimit, VelocityLimit
+from retarget.limits.joints import FrameSpeedLimit, JointLimit, VelocityLimit
 
 __all__ = [
     "CollisionLimit",
     "ContactSweep",
     "CouplingLimit",
+    "FrameSpeedLimit",
     "JointLimit",
     "Limit",
     "VelocityLimit",
