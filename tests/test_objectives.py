@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from test_kinematics import TOY
 
+from retarget.errors import RetargetError
 from retarget.kinematics import PinocchioKinematics
 from retarget.limits import (
     CollisionLimit,
@@ -157,7 +158,7 @@ def test_frame_speed_limit_bounds_the_motion_since_the_last_frame(kin):
     lb, ub = lim.bounds(_state(kin, q_out))
     assert lb[0] == pytest.approx(-4 * v[0] * s.dt) and ub[0] == 0.0  # back, not further out
     assert np.isinf(lb[1:]).all() and np.isinf(ub[1:]).all()
-    with pytest.raises(ValueError, match="one per joint"):
+    with pytest.raises(RetargetError, match="one per joint"):
         FrameSpeedLimit(q_prev, v[:2])
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from retarget.errors import RetargetError
 from retarget.limits.base import Limit
 from retarget.state import RobotState
 
@@ -61,7 +62,7 @@ class FrameSpeedLimit(Limit):
         self.q_prev = np.asarray(q_prev, dtype=np.float64)
         self.v_max = np.asarray(v_max, dtype=np.float64)
         if self.q_prev.shape != self.v_max.shape:
-            raise ValueError(
+            raise RetargetError(
                 f"q_prev has shape {self.q_prev.shape}, v_max {self.v_max.shape}: one per joint"
             )
 
