@@ -20,8 +20,10 @@ and the limits are the joint ranges, velocity bounds, the model's couplings, non
 of the hand's collision geoms and the object, and no self-collision between the collision geoms
 of different fingers (and of fingers and palm; ``HandModel.self_collision_pairs``). The same
 objectives run on the Pinocchio backend (default; our QP through ``qpsolvers``) or the mink
-backend (``mink.solve_ik`` with the objectives as mink tasks and mink's own configuration and
-collision limits).
+backend (``mink.solve_ik`` with the objectives as mink tasks, mink's configuration limit and
+self-collision limit, and our hand–object, coupling and wrist-speed rows: mink's collision limit
+has one minimum distance for all pairs, no table clearance or per-link clearance). The
+warm-start prediction and the end-of-step penetration re-steps are the Pinocchio backend's.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ import mujoco
 import numpy as np
 
 from dexcanvas_core.keypoints import FINGERS, MANO21
-from dexcanvas_core.rotations import aa_to_matrix
+from dexcanvas_core.rotations import aa_to_matrix, aa_to_quat_wxyz
 from dexcanvas_core.trajectory import Trajectory
 from retarget.errors import RetargetError
 from retarget.hands.base import WRIST_SITE, wrist_qpos_from_mano
@@ -134,7 +136,7 @@ class RetargetConfig:
     both ways: keypoint targets near the surface can press a robot link the human kept clear
     onto the object (Shadow on generated cube2/tripod, operator2: the ring finger's middle
     link 1 mm into the cube, and in re-simulation the grasp was thumb–middle–ring instead of
-    the human's thumb–index–middle). Pinocchio backend only. Measured with
+    the human's thumb–index–middle). Both backends. Measured with
     benchmarks/retarget_speed_quality.py (3 hands × 20 pairs, surface keypoint scaling),
     0 → 2 mm: strict re-sim success 42 → 47 %, finger–finger penetration 1.37 → 1.01 mm."""
     collision_distmax: float = 0.03
@@ -758,15 +760,14 @@ class Retargeter:
         ):
             fm = self._grip_targets(traj)
         ramp = contact_ramp(tg["contact_active"], self.cfg.contact_ramp_s * traj.fps)
-        wq = np.array(
-            [wrist_qpos_from_mano(R, p) for R, p in zip(tg["wrist_R"], tg["wrist_p"], strict=True)]
-        )
+        wq = wrist_qpos_from_mano(tg["wrist_R"], tg["wrist_p"])  # (T, 6)
+        obj_quat = aa_to_quat_wxyz(traj.object.rot_aa) if has_obj else None
         clearance = self.collision is not None and self._pair_parts is not None
         margins = self._frame_margins(tg["contact_by_part"]) if clearance else None  # (T, pairs)
         try:
             for t in range(T):
                 if has_obj:
-                    self.scene.set_object_pose(traj.object.pos[t], traj.object.rot_aa[t])
+                    self.scene.set_object_pose(traj.object.pos[t], quat_wxyz=obj_quat[t])
                 self.wrist.set_target(tg["wrist_p"][t], tg["wrist_R"][t])
                 self.keypoints.set_targets(tg["keypoints"][t])
                 if self.vec_human:
@@ -988,11 +989,11 @@ class Retargeter:
         pts = self.contacts.finger_points(q)
         idx = np.flatnonzero(active)
         fingers = np.isfinite(fm["kp"])
-        J = []
-        for i in idx:
-            Ji = self.kin.point_jacobian(*pts[i])[:, : self.nq].copy()
-            Ji[:, ~fingers] = 0.0  # the wrist and unservoed joints do not squeeze
-            J.append(Ji)
+        Jall = self.kin.point_jacobians(
+            tuple(pts[i][0] for i in idx), np.array([pts[i][1] for i in idx])
+        )[:, :, : self.nq]
+        Jall[:, :, ~fingers] = 0.0  # the wrist and unservoed joints do not squeeze
+        J = list(Jall)
         com = fm["p_obj"][t] + fm["R_obj"][t] @ fm["com_local"]
         dist = distribute(
             np.array([pts[i][1] for i in idx]),
@@ -1013,11 +1014,8 @@ class Retargeter:
         # reached instead of the human's ~2 N, the cube dropped)
         gap = np.maximum(self.contacts.finger_distances(q)[idx], 0.0)
         if gap.any():
-            Jg = np.concatenate(J, axis=0)
-            delta = np.concatenate(
-                [-g * n for g, n in zip(gap, tg["contact_normals"][t][idx], strict=True)]
-            )
-            dq = dq + _damped_step(Jg, delta)
+            delta = -(gap[:, None] * normals[idx]).reshape(-1)
+            dq = dq + _damped_step(Jall.reshape(-1, self.nq), delta)
         return np.clip(q + dq, self.lower, self.upper) - q
 
     def _squeeze(self, q: np.ndarray, active: np.ndarray, normals: np.ndarray) -> np.ndarray:
@@ -1058,11 +1056,11 @@ class Retargeter:
         q_prev: np.ndarray | None = None,
     ) -> np.ndarray:
         dt = float(timestamp[t] - timestamp[t - 1]) if t > 0 else 1.0 / 30.0
-        if self._mink is not None:
-            return self._mink.solve(q, iterations)
         frame = []
         if q_prev is not None and np.isfinite(self.cfg.max_wrist_speed):
             frame = [FrameSpeedLimit(q_prev, self._wrist_speed)]
+        if self._mink is not None:
+            return self._mink.solve(q, iterations, frame, dt)
         vel = VelocityLimit(self.cfg.max_joint_speed)
         limits = [*self.limits, vel, *frame] if t > 0 else self.limits
         objectives = self._objectives()
@@ -1224,17 +1222,11 @@ class _MinkSolver:
         self.kin = rt.kin
         self.limits = [mink.ConfigurationLimit(m, gain=1.0)]
         if rt.collision is not None:
-            hand = [m.geom(g).name for g in rt.scene.hand_geoms]
-            obj = [m.geom(g).name for g in rt.scene.object_geoms + rt.scene.table_geoms]
-            self.limits.append(
-                mink.CollisionAvoidanceLimit(
-                    m,
-                    geom_pairs=[(hand, obj)],
-                    gain=1.0,
-                    minimum_distance_from_collisions=-rt.cfg.penetration_margin,
-                    collision_detection_distance=rt.cfg.collision_distmax,
-                )
-            )
+            # Our hand–object rows, as on the Pinocchio backend: per-pair margins (the table's
+            # clearance, the clearance of links the human keeps off the object) and the further
+            # contacts mj_collision reports, which mink's CollisionAvoidanceLimit (one minimum
+            # distance, closest points only) cannot express.
+            self.limits.append(self._rows(rt.collision))
         if rt.self_collision is not None:
             # One mink pair per self-collision pair: grouping all hand geoms would also pair
             # links of one finger and the resting contacts the hand excludes.
@@ -1251,17 +1243,33 @@ class _MinkSolver:
         self.constraints = [mink.EqualityConstraintTask(m, cost=1.0)] if m.neq else []
         coupling = next((c for c in rt.limits if isinstance(c, CouplingLimit)), None)
         if coupling is not None and coupling.ranges:
-            # Limited fixed tendons (Shadow's distal coupling): mink has no tendon limit, so
-            # the same rows as the Pinocchio backend's (G Δq ≤ h, Δq = v·dt with dt = 1).
-            kin = rt.kin
+            # Limited fixed tendons (Shadow's distal coupling): mink has no tendon limit.
+            self.limits.append(self._rows(coupling))
+        self.frame_dt = 1.0 / 30.0  # the frame's time step (FrameSpeedLimit's band)
 
-            class _TendonRanges(mink.Limit):
-                def compute_qp_inequalities(self, configuration, dt):
-                    q = configuration.q[: rt.nq]
-                    G, h = coupling.inequalities(RobotState(q=q, kin=kin))
-                    return mink.Constraint(G=G * dt, h=h)
+    def _rows(self, limit):
+        """One of our limits as a mink limit: its rows ``G Δq ≤ h`` and its finite box
+        bounds, at the configuration mink solves at (``Δq = v·dt``)."""
+        import mink
 
-            self.limits.append(_TendonRanges())
+        kin, nq, solver = self.kin, self.rt.nq, self
+
+        class _Rows(mink.Limit):
+            def compute_qp_inequalities(self, configuration, dt):
+                state = RobotState(q=configuration.q[:nq].copy(), kin=kin, dt=solver.frame_dt)
+                G, h = limit.inequalities(state)
+                box = limit.bounds(state)
+                if box is not None:
+                    eye = np.eye(nq)
+                    lo, hi = box
+                    up, dn = np.isfinite(hi), np.isfinite(lo)
+                    G = np.concatenate([G, eye[up], -eye[dn]])
+                    h = np.concatenate([h, hi[up], -lo[dn]])
+                if not G.shape[0]:
+                    return mink.Constraint()
+                return mink.Constraint(G=G * dt, h=h)
+
+        return _Rows()
 
     def _task(self, objective):
         import mink
@@ -1296,16 +1304,20 @@ class _MinkSolver:
 
         return _Task()
 
-    def solve(self, q: np.ndarray, iterations: int) -> np.ndarray:
+    def solve(self, q: np.ndarray, iterations: int, frame=(), dt: float = 1.0 / 30.0):
+        """``iterations`` mink steps from ``q``; ``frame``: per-frame limits of ours (the
+        wrist's speed bound), ``dt`` the frame's time step."""
         import mink
 
         conf = self.configuration
         conf.update(q)
+        self.frame_dt = dt
         tasks = [self._task(o) for o in self.rt._objectives()]
+        limits = [*self.limits, *(self._rows(x) for x in frame)]
         for _ in range(iterations):
             v = mink.solve_ik(
                 conf, tasks, dt=1.0, solver=self.rt.cfg.solver, damping=self.rt.cfg.damping,
-                limits=self.limits, constraints=self.constraints or None,
+                limits=limits, constraints=self.constraints or None,
             )  # fmt: skip
             conf.integrate_inplace(v, 1.0)
             if np.abs(v).max() < self.rt.cfg.step_tolerance:

@@ -33,13 +33,21 @@ class Scene:
     object_body: int
     table_geoms: list[int]
 
-    def set_object_pose(self, p_world: np.ndarray, rot_aa: np.ndarray) -> None:
-        """Pose the (mocap) object: position [m] and axis-angle [rad]."""
+    def set_object_pose(
+        self, p_world: np.ndarray, rot_aa: np.ndarray | None = None, quat_wxyz=None
+    ) -> None:
+        """Pose the (mocap) object: position [m] and axis-angle [rad], or (``quat_wxyz``) a
+        unit quaternion, scalar first (a whole trajectory's converted at once is ~50× cheaper
+        than one conversion per frame)."""
         mid = self.model.body_mocapid[self.object_body]
         if mid < 0:
             raise RetargetError("set_object_pose needs the mocap object of a retargeting scene")
+        if (rot_aa is None) == (quat_wxyz is None):
+            raise RetargetError("set_object_pose: give exactly one of rot_aa and quat_wxyz")
         self.data.mocap_pos[mid] = p_world
-        self.data.mocap_quat[mid] = aa_to_quat_wxyz(np.asarray(rot_aa, dtype=np.float64))
+        if quat_wxyz is None:
+            quat_wxyz = aa_to_quat_wxyz(np.asarray(rot_aa, dtype=np.float64))
+        self.data.mocap_quat[mid] = quat_wxyz
 
 
 def build_retarget_scene(

@@ -113,9 +113,15 @@ def test_mink_backend_runs_and_matches(demo):
     geo = object_geometry("cube2")
     a = Retargeter(hand, geo, RetargetConfig(backend="pinocchio")).retarget(demo)
     b = Retargeter(hand, geo, RetargetConfig(backend="mink")).retarget(demo)
-    # Same objectives; the limits differ in form (mink's collision limit is its own), so the
+    # Same objectives and hand–object rows; the self-collision limit is mink's own, so the
     # solutions agree to within a few millimetres of keypoint error.
     assert abs(a.keypoint_err.mean() - b.keypoint_err.mean()) < 5e-3
+    # The hand–object rows and the wrist's speed bound hold on mink too (with mink's own
+    # collision limit this demo went 3.2 mm into the cube).
+    cfg = RetargetConfig()
+    assert b.min_distance[1:].min() > -(cfg.penetration_margin + 5e-4)
+    dt = np.diff(demo.timestamp)[:, None]
+    assert (np.abs(np.diff(b.q[:, :3], axis=0)) <= cfg.max_wrist_speed * dt + 1e-6).all()
 
 
 @pytest.mark.parametrize("backend", ["pinocchio", "mink"])
@@ -178,6 +184,34 @@ def test_surface_contact_jacobian_matches_finite_differences(demo, part):
         dq = np.zeros(rt.nq)
         dq[i] = eps
         np.testing.assert_allclose((points(q + dq) - p0) / eps, J[:, i], atol=1e-5)
+
+
+def test_surface_contact_qp_terms_equal_error_and_jacobian(demo):
+    """The contact term's one-pass ``(H, c)`` is ``JᵀWJ, JᵀWe`` of its error and Jacobian,
+    with the ramps in the weights and inactive fingers left out."""
+    from retarget.objectives.base import Objective
+
+    rt = Retargeter(get_hand("shadow"), object_geometry("cube2"))
+    tg = rt.human_targets(demo)
+    t = int(np.flatnonzero(tg["contact_active"].sum(axis=1) >= 2)[0])
+    rt.scene.set_object_pose(demo.object.pos[t], demo.object.rot_aa[t])
+    F = len(rt.tip_sites)
+    active = tg["contact_active"][t].copy()
+    active[np.flatnonzero(~active)[:1]] = False
+    ramp = np.linspace(0.3, 1.0, F)
+    rt.contacts.set_contacts(active, tg["contact_points"][t], tg["contact_part"][t], ramp)
+    q = rt.q_default.copy()
+    q[:6] = [*tg["wrist_p"][t], 0.1, -0.2, 0.3]
+    rt.kin.forward(q)
+    s = RobotState(q=q, kin=rt.kin)
+    H, c = rt.contacts.qp_terms(s)
+    H0, c0 = Objective.qp_terms(rt.contacts, s)
+    assert np.abs(c0).max() > 1e-6  # the fingers are off their targets
+    np.testing.assert_allclose(H, H0, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(c, c0, rtol=1e-12, atol=1e-14)
+    rt.contacts.set_contacts(np.zeros(F, bool), tg["contact_points"][t])
+    H, c = rt.contacts.qp_terms(s)
+    assert not H.any() and not c.any()
 
 
 @pytest.fixture(scope="module")

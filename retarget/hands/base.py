@@ -771,16 +771,17 @@ def _prepare_source(src) -> None:
 def wrist_qpos_from_mano(R_world_mano, p_world_wrist) -> np.ndarray:
     """The 6 wrist joint values (x, y, z [m], rx, ry, rz [rad]) for a MANO wrist pose.
 
-    ``R_world_mano`` (3, 3): MANO's global rotation; ``p_world_wrist`` (3,): the posed wrist
-    joint J0 [m]. Works on single poses; use ``scipy`` for batches (``euler "XYZ"``).
+    ``R_world_mano`` (..., 3, 3): MANO's global rotation; ``p_world_wrist`` (..., 3): the posed
+    wrist joint J0 [m]. A batch (a whole trajectory at once) gives (..., 6).
     """
     from scipy.spatial.transform import Rotation
 
     R = np.asarray(R_world_mano, float)
     p = np.asarray(p_world_wrist, float)
-    if R.shape != (3, 3) or p.shape != (3,):
-        raise ValueError(f"expected R (3, 3) and p (3,), got {R.shape} and {p.shape}")
-    return np.concatenate([p, Rotation.from_matrix(R).as_euler("XYZ")])
+    if R.shape[-2:] != (3, 3) or p.shape[-1:] != (3,) or R.shape[:-2] != p.shape[:-1]:
+        raise ValueError(f"expected R (..., 3, 3) and p (..., 3), got {R.shape} and {p.shape}")
+    euler = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_euler("XYZ").reshape(p.shape)
+    return np.concatenate([p, euler], axis=-1)
 
 
 def package_path(module: str, *parts: str, pip_name: str | None = None):

@@ -87,8 +87,10 @@ class ContactSweep:
             raise RetargetError("ContactSweep needs contacts enabled (mjDSBL_CONTACT is set)")
         self.model, self.data, self.hand_nq = model, data, hand_nq
         self._q: np.ndarray | None = None
-        self._mocap_pos = np.zeros((model.nmocap, 3))
-        self._mocap_quat = np.zeros((model.nmocap, 4))
+        self._key = b""  # q and the mocap poses of the cached sweep, as bytes
+        self.version = 0
+        """Counts the sweeps run: the limits' per-configuration results are valid while it
+        stays the same."""
         self._none_i, self._none_f, self._none_3 = np.zeros(0, int), np.zeros(0), np.zeros((0, 3))
         self._none_b = np.zeros(0, bool)
         # Registered pairs (all limits on this sweep): (geom, geom) → registered pair index.
@@ -137,12 +139,11 @@ class ContactSweep:
     def update(self, q: np.ndarray) -> None:
         """Contacts at hand configuration ``q`` (and the current mocap poses); cached."""
         d = self.data
-        if (
-            self._q is not None
-            and (q == self._q).all()
-            and (d.mocap_pos == self._mocap_pos).all()
-            and (d.mocap_quat == self._mocap_quat).all()
-        ):
+        q = np.asarray(q, dtype=np.float64)
+        # Bytes compare: ~0.3 µs against ~8 µs for three array comparisons, and this check
+        # runs several times per iterate (every limit and metric asks).
+        key = q.tobytes() + d.mocap_pos.tobytes() + d.mocap_quat.tobytes()
+        if self._q is not None and key == self._key:
             return
         d.qpos[: self.hand_nq] = q
         mujoco.mj_kinematics(self.model, d)
@@ -155,8 +156,9 @@ class ContactSweep:
                 f"mj_collision ran out of contact memory ({d.ncon} contacts within the margins); "
                 "give the scene a larger memory size or smaller collision distmax values"
             )
-        self._q = np.array(q, dtype=np.float64)
-        self._mocap_pos, self._mocap_quat = d.mocap_pos.copy(), d.mocap_quat.copy()
+        self._q = q.copy()
+        self._key = key
+        self.version += 1
         c = d.contact
         geom = c.geom.reshape(-1, 2)
         pair = self._lut[geom[:, 0] * self.model.ngeom + geom[:, 1]]
@@ -188,6 +190,7 @@ class ContactSweep:
     def invalidate(self) -> None:
         """Forget the cached contacts (after changing the scene other than ``q``/mocap)."""
         self._q = None
+        self.version += 1
 
     def query_distance(self, ga: int, gb: int) -> float:
         """The distance [m] up to which ``mj_collision`` reports the pair (its margin), or
@@ -323,6 +326,7 @@ class CollisionLimit(Limit):
             np.zeros(0, int), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
         )
         self.sweep = sweep
+        self._cached: tuple[int, PairDistances] | None = None  # (sweep version, query's answer)
         if sweep is not None:
             if sweep.model is not model or sweep.data is not data:
                 raise RetargetError("the contact sweep must run on the limit's own model and data")
@@ -366,17 +370,30 @@ class CollisionLimit(Limit):
         """Signed distances and nearest points of every pair within ``distmax`` at ``q``."""
         if self.sweep is None:
             return self._query_direct(q)
-        swept = self._query_sweep(q)  # (leaves data at q)
+        # The answer is kept with the sweep's version: the warm-start check, the first
+        # iterate's rows and the step's end check ask at the same configuration (box and mesh
+        # pairs' mj_geomDistance calls and the selection are then done once).
+        self.sweep.update(q)  # (leaves data at q)
+        key = (self.sweep.version, self.distmax)
+        if self._cached is not None and self._cached[0] == key:
+            return self._cached[1]
+        swept = self._query_sweep(q)
         if self._swept.size == len(self.pairs):
-            return swept
-        direct = self._query_direct(q, kinematics=False)
-        if not direct.index.size:
-            return swept
-        if not swept.index.size:
-            return direct
-        return PairDistances(
-            *(np.concatenate([getattr(swept, f), getattr(direct, f)]) for f in _FIELDS)
-        )
+            out = swept
+        else:
+            direct = self._query_direct(q, kinematics=False)
+            if not direct.index.size:
+                out = swept
+            elif not swept.index.size:
+                out = direct
+            else:
+                out = PairDistances(
+                    *(np.concatenate([getattr(swept, f), getattr(direct, f)]) for f in _FIELDS)
+                )
+        for f in _FIELDS:  # shared by every caller until the next sweep
+            getattr(out, f).flags.writeable = False
+        self._cached = (key, out)
+        return out
 
     def _query_direct(self, q: np.ndarray, kinematics: bool = True) -> PairDistances:
         """The per-pair path: sphere broad phase, then ``mj_geomDistance`` per candidate."""

@@ -197,6 +197,7 @@ class SurfaceContactObjective(Objective):
             out.append((best_b, best_p))
             dists.append(best)
         self._cache_q, self._cache, self._cache_d = q.copy(), out, np.array(dists)
+        self._cache_p = np.array([p for _, p in out])  # (F, 3)
         return out
 
     def finger_distances(self, q: np.ndarray) -> np.ndarray:
@@ -223,7 +224,19 @@ class SurfaceContactObjective(Objective):
             return np.zeros((0, state.nv))
         pts = self.finger_points(state.q)
         idx = np.flatnonzero(self.active).tolist()
-        J = state.kin.point_jacobians(
-            tuple(pts[i][0] for i in idx), np.array([pts[i][1] for i in idx])
-        )
+        J = state.kin.point_jacobians(tuple(pts[i][0] for i in idx), self._cache_p[idx])
         return J.reshape(-1, state.nv)
+
+    def qp_terms(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`error` and :meth:`jacobian` in one pass over the active fingers (the same
+        ``(H, c)`` as the base class's; a test pins the two)."""
+        nv = state.nv
+        idx = np.flatnonzero(self.active)
+        if not idx.size:
+            return np.zeros((nv, nv)), np.zeros(nv)
+        pts = self.finger_points(state.q)
+        P = self._cache_p[idx]
+        e = (P - self.points[idx]).reshape(-1)
+        J = state.kin.point_jacobians(tuple(pts[i][0] for i in idx.tolist()), P).reshape(-1, nv)
+        JW = J.T * (float(self.weight) * np.repeat(self.ramp[idx], 3))
+        return JW @ J, JW @ e
