@@ -75,6 +75,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import logging
 import multiprocessing
 import os
@@ -487,6 +488,57 @@ def heavy_vs_light(rows: list[dict]) -> dict:
     return out
 
 
+CONTACT_ERROR_BINS_M = (0.002, 0.005, 0.010)
+"""Upper edges of the contact-error bins of :func:`by_contact_error` (the last bin is open)."""
+
+
+def by_contact_error(rows: list[dict]) -> dict:
+    """Strict success of variants (c)–(e) by the run's kinematic contact error: the mean
+    distance from each contacting robot link to the human's contact point, of variant (d)'s
+    retargeting (the same targets as (c)'s; (e) refines (d)). A contact the robot cannot reach
+    puts its finger elsewhere on the object, and the grasp the human used is not the one
+    re-simulated. ``{variant: [{"bin": label, "runs", "success_rate"}]}``."""
+    ref = {
+        (r["hand"], r["index"], r["object_id"]): r.get("contact_err_mean_m")
+        for r in rows
+        if r["variant"] == "d" and "skipped" not in r and "error" not in r
+    }
+    edges = (0.0, *CONTACT_ERROR_BINS_M, np.inf)
+    labels = [
+        f"{1e3 * lo:.0f}–{1e3 * hi:.0f} mm" if np.isfinite(hi) else f"> {1e3 * lo:.0f} mm"
+        for lo, hi in itertools.pairwise(edges)
+    ]
+    out = {}
+    for v in ("c", "d", "e"):
+        rs = [r for r in rows if r["variant"] == v and "skipped" not in r]
+        err = [ref.get((r["hand"], r["index"], r["object_id"])) for r in rs]
+        out[v] = []
+        for lab, (lo, hi) in zip(labels, itertools.pairwise(edges), strict=True):
+            sel = [r for r, e in zip(rs, err, strict=True) if e is not None and lo <= e < hi]
+            out[v].append({"bin": lab, "runs": len(sel), "success_rate": _rate(sel)})
+    return out
+
+
+def contact_error_table(scope: str, table: dict):
+    from rich.table import Table
+
+    t = Table(
+        title=f"{scope}: strict success % by kinematic contact error (runs)",
+        caption="contact error: mean distance from each contacting robot link to the human's "
+        "contact point in (d)'s retargeting",
+    )
+    t.add_column("contact error", no_wrap=True)
+    for v in ("c", "d", "e"):
+        t.add_column(LABELS[v], justify="right", no_wrap=True)
+    for k, row in enumerate(table["d"]):
+        cells = []
+        for v in ("c", "d", "e"):
+            b = table[v][k]
+            cells.append(f"{_f(b['success_rate'], 100, '.0f')} ({b['runs']})")
+        t.add_row(row["bin"], *cells)
+    return t
+
+
 def target_checks(scope: str, rows: list[dict], agg: dict, hv: dict) -> list[dict]:
     """The issue's targets on one scope's rows (``met`` is ``None`` when not measured)."""
     d = agg["d"]
@@ -878,6 +930,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         scopes = {FIVE_FINGER: [r for r in rows if r["hand"] in five], **scopes}
     scope_aggs = {s: aggregate_variants(rs) for s, rs in scopes.items()}
     hv = {s: heavy_vs_light(rs) for s, rs in scopes.items()}
+    by_contact = {s: by_contact_error(rs) for s, rs in scopes.items()}
     target_scope = FIVE_FINGER if five else ALL_HANDS
     checks = target_checks(
         target_scope, scopes[target_scope], scope_aggs[target_scope], hv[target_scope]
@@ -896,6 +949,10 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         names = ", ".join(five) if s == FIVE_FINGER else ", ".join(h.name for h in hands)
         console.print(variants_table(f"{s} ({names})", a))
     console.print(heavy_table(hv))
+    for s_, tab in by_contact.items():
+        if s_ == ALL_HANDS and len(hands) == 1:
+            continue
+        console.print(contact_error_table(s_, tab))
     console.print(targets_table(target_scope, checks))
 
     plot = plot_success(
@@ -963,7 +1020,12 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
             "five_finger_hands": "hands with five distinct robot fingers",
         },
         "targets": checks,
-        "aggregates": {"per_scope": scope_aggs, "per_hand": per_hand, "heavy_vs_light": hv},
+        "aggregates": {
+            "per_scope": scope_aggs,
+            "per_hand": per_hand,
+            "heavy_vs_light": hv,
+            "by_contact_error": by_contact,
+        },
         "runs": rows,
         "wall_time_s": time.perf_counter() - t_start,
     }
