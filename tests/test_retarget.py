@@ -214,6 +214,18 @@ def test_surface_contact_qp_terms_equal_error_and_jacobian(demo):
     assert not H.any() and not c.any()
 
 
+def test_contact_error_per_finger_and_shape_errors():
+    from retarget.run import contact_error_per_finger
+
+    err = np.array([[0.001, np.nan, np.nan], [0.003, 0.02, np.nan]])
+    assert contact_error_per_finger(err, ["thumb", "index", "middle"]) == {
+        "thumb": pytest.approx(0.002),
+        "index": pytest.approx(0.02),
+    }
+    with pytest.raises(RetargetError, match="must be \\(frames, 2\\)"):
+        contact_error_per_finger(err, ["thumb", "index"])
+
+
 @pytest.fixture(scope="module")
 def small_dataset(tmp_path_factory, demo):
     path = tmp_path_factory.mktemp("rt") / "d.lance"
@@ -244,7 +256,18 @@ def test_cli_run_writes_outputs(small_dataset, tmp_path, capsys):
                 "self_penetration_max_m", "ms_per_frame"):  # fmt: skip
         assert key in m
     assert 0.0 <= m["self_penetration_max_m"] < 2e-3
+    # per-finger contact error: the mean over each finger's contact frames of the saved errors
     z = np.load(out / "robot_trajectory.npz")
+    per = m["contact_err_per_finger_m"]
+    assert per and set(per) <= {"thumb", "index", "middle", "ring", "pinky"}
+    allegro = get_hand("allegro")
+    names = [f for f in ("thumb", "index", "middle", "ring", "pinky") if allegro.fingers.get(f)]
+    for k, f in enumerate(names):
+        e = z["contact_err"][:, k]
+        assert (f in per) == bool(np.isfinite(e).any())
+        if f in per:
+            assert per[f] == pytest.approx(np.nanmean(e), rel=1e-9)
+    assert set(m["contacts_off_target"]) == {f for f, e in per.items() if e > 0.005}
     assert z["self_min_distance"].shape == (120,)
     assert z["q"].shape == (120, len(z["joint_names"]))
     assert z["finger_force_world"].shape == (120, 5, 3)
