@@ -989,14 +989,13 @@ class Retargeter:
         pts = self.contacts.finger_points(q)
         idx = np.flatnonzero(active)
         fingers = np.isfinite(fm["kp"])
-        Jall = self.kin.point_jacobians(
-            tuple(pts[i][0] for i in idx), np.array([pts[i][1] for i in idx])
-        )[:, :, : self.nq]
+        P = self.contacts.finger_point_array(q)[idx]
+        Jall = self.kin.point_jacobians(tuple(pts[i][0] for i in idx), P)[:, :, : self.nq]
         Jall[:, :, ~fingers] = 0.0  # the wrist and unservoed joints do not squeeze
         J = list(Jall)
         com = fm["p_obj"][t] + fm["R_obj"][t] @ fm["com_local"]
         dist = distribute(
-            np.array([pts[i][1] for i in idx]),
+            P,
             normals[idx],
             f_des[idx],
             W,
@@ -1032,7 +1031,7 @@ class Retargeter:
         pts = self.contacts.finger_points(q)
         idx = np.flatnonzero(active)
         J = self.kin.point_jacobians(
-            tuple(pts[i][0] for i in idx), np.array([pts[i][1] for i in idx])
+            tuple(pts[i][0] for i in idx), self.contacts.finger_point_array(q)[idx]
         ).reshape(-1, self.nq)
         J[:, :6] = 0.0
         delta = np.concatenate([-self.cfg.squeeze_depth * normals[i] for i in idx])

@@ -86,8 +86,7 @@ class ContactSweep:
         if model.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CONTACT:
             raise RetargetError("ContactSweep needs contacts enabled (mjDSBL_CONTACT is set)")
         self.model, self.data, self.hand_nq = model, data, hand_nq
-        self._q: np.ndarray | None = None
-        self._key = b""  # q and the mocap poses of the cached sweep, as bytes
+        self._key = b""  # q and the mocap poses of the cached sweep, as bytes (b"": none)
         self.version = 0
         """Counts the sweeps run: the limits' per-configuration results are valid while it
         stays the same."""
@@ -119,7 +118,7 @@ class ContactSweep:
         self._lut[ga * ng + gb] = offset + np.arange(ga.size)
         self._lut[gb * ng + ga] = offset + np.arange(ga.size)
         self._ga = np.concatenate([self._ga, ga])
-        self._q = None
+        self.invalidate()
         return offset
 
     def set_margins(self, geoms: Sequence[int], margin: float) -> None:
@@ -134,7 +133,7 @@ class ContactSweep:
         if m.npair:
             m.pair_margin[:] = np.maximum(m.geom_margin[m.pair_geom1], m.geom_margin[m.pair_geom2])
             m.pair_gap[:] = 0.0
-        self._q = None
+        self.invalidate()
 
     def update(self, q: np.ndarray) -> None:
         """Contacts at hand configuration ``q`` (and the current mocap poses); cached."""
@@ -143,7 +142,7 @@ class ContactSweep:
         # Bytes compare: ~0.3 µs against ~8 µs for three array comparisons, and this check
         # runs several times per iterate (every limit and metric asks).
         key = q.tobytes() + d.mocap_pos.tobytes() + d.mocap_quat.tobytes()
-        if self._q is not None and key == self._key:
+        if key == self._key:
             return
         d.qpos[: self.hand_nq] = q
         mujoco.mj_kinematics(self.model, d)
@@ -156,7 +155,6 @@ class ContactSweep:
                 f"mj_collision ran out of contact memory ({d.ncon} contacts within the margins); "
                 "give the scene a larger memory size or smaller collision distmax values"
             )
-        self._q = q.copy()
         self._key = key
         self.version += 1
         c = d.contact
@@ -189,7 +187,7 @@ class ContactSweep:
 
     def invalidate(self) -> None:
         """Forget the cached contacts (after changing the scene other than ``q``/mocap)."""
-        self._q = None
+        self._key = b""
         self.version += 1
 
     def query_distance(self, ga: int, gb: int) -> float:
@@ -377,7 +375,7 @@ class CollisionLimit(Limit):
         key = (self.sweep.version, self.distmax)
         if self._cached is not None and self._cached[0] == key:
             return self._cached[1]
-        swept = self._query_sweep(q)
+        swept = self._query_sweep()
         if self._swept.size == len(self.pairs):
             out = swept
         else:
@@ -420,9 +418,9 @@ class CollisionLimit(Limit):
         p_a, p_b = pts[keep, :3], pts[keep, 3:]
         return PairDistances(idx[keep], dist[keep], p_a, p_b, _normals(dist[keep], p_a, p_b))
 
-    def _query_sweep(self, q: np.ndarray) -> PairDistances:
+    def _query_sweep(self) -> PairDistances:
+        """The swept pairs' closest contacts within ``distmax`` (after ``sweep.update``)."""
         sw = self.sweep
-        sw.update(q)
         i = sw.pair - self._offset
         k = np.flatnonzero(
             (i >= 0) & (i < self._swept.size) & sw.closest & (sw.dist < self.distmax)

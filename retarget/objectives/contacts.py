@@ -200,6 +200,11 @@ class SurfaceContactObjective(Objective):
         self._cache_p = np.array([p for _, p in out])  # (F, 3)
         return out
 
+    def finger_point_array(self, q: np.ndarray) -> np.ndarray:
+        """(F, 3) [m] the points of :meth:`finger_points` as one array (shared: do not modify)."""
+        self.finger_points(q)
+        return self._cache_p
+
     def finger_distances(self, q: np.ndarray) -> np.ndarray:
         """(F,) [m] signed distance from each finger to the object (negative: penetrating)."""
         self.finger_points(q)
@@ -224,7 +229,9 @@ class SurfaceContactObjective(Objective):
             return np.zeros((0, state.nv))
         pts = self.finger_points(state.q)
         idx = np.flatnonzero(self.active).tolist()
-        J = state.kin.point_jacobians(tuple(pts[i][0] for i in idx), self._cache_p[idx])
+        J = state.kin.point_jacobians(
+            tuple(pts[i][0] for i in idx), self.finger_point_array(state.q)[idx]
+        )
         return J.reshape(-1, state.nv)
 
     def qp_terms(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
@@ -235,7 +242,7 @@ class SurfaceContactObjective(Objective):
         if not idx.size:
             return np.zeros((nv, nv)), np.zeros(nv)
         pts = self.finger_points(state.q)
-        P = self._cache_p[idx]
+        P = self.finger_point_array(state.q)[idx]
         e = (P - self.points[idx]).reshape(-1)
         J = state.kin.point_jacobians(tuple(pts[i][0] for i in idx.tolist()), P).reshape(-1, nv)
         JW = J.T * (float(self.weight) * np.repeat(self.ramp[idx], 3))
