@@ -214,6 +214,46 @@ def test_surface_contact_qp_terms_equal_error_and_jacobian(demo):
     assert not H.any() and not c.any()
 
 
+def test_surface_contact_tangent_weight_scales_only_the_tangential_pull(demo):
+    """With surface normals and a tangent weight α, each contact's weight is
+    ``w (n nᵀ + α (I − n nᵀ))``: full along the normal, α across it (one pass and base class
+    agree, and both equal that matrix built by hand)."""
+    from retarget.objectives.base import Objective
+
+    rt = Retargeter(get_hand("shadow"), object_geometry("cube2"))
+    tg = rt.human_targets(demo)
+    t = int(np.flatnonzero(tg["contact_active"].sum(axis=1) >= 2)[0])
+    rt.scene.set_object_pose(demo.object.pos[t], demo.object.rot_aa[t])
+    active = tg["contact_active"][t]
+    n = tg["contact_normals"][t]
+    q = rt.q_default.copy()
+    q[:6] = [*tg["wrist_p"][t], 0.1, -0.2, 0.3]
+    rt.kin.forward(q)
+    s = RobotState(q=q, kin=rt.kin)
+    alpha = 0.2
+    rt.contacts.tangent_weight = alpha
+    rt.contacts.set_contacts(active, tg["contact_points"][t], tg["contact_part"][t], normals=n)
+    H, c = rt.contacts.qp_terms(s)
+    H0, c0 = Objective.qp_terms(rt.contacts, s)
+    np.testing.assert_allclose(H, H0, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(c, c0, rtol=1e-10, atol=1e-12)
+    idx = np.flatnonzero(active)
+    pts = rt.contacts.finger_points(q)
+    P = rt.contacts.finger_point_array(q)[idx]
+    J = rt.kin.point_jacobians(tuple(pts[i][0] for i in idx), P)
+    Hm, cm = np.zeros_like(H), np.zeros_like(c)
+    for k, i in enumerate(idx):
+        u = n[i] / np.linalg.norm(n[i])
+        W = rt.cfg.w_contacts * (np.outer(u, u) + alpha * (np.eye(3) - np.outer(u, u)))
+        Hm += J[k].T @ W @ J[k]
+        cm += J[k].T @ W @ (P[k] - tg["contact_points"][t][i])
+    np.testing.assert_allclose(H, Hm, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(c, cm, rtol=1e-9, atol=1e-9)
+    assert np.abs(cm).max() > 1e-6
+    with pytest.raises(RetargetError, match="normals must be"):
+        rt.contacts.set_contacts(active, tg["contact_points"][t], normals=n[:2])
+
+
 def test_contact_error_per_finger_and_shape_errors():
     from retarget.run import contact_error_per_finger
 
@@ -449,18 +489,24 @@ def test_contact_ramp_rises_and_falls():
 
 def test_onsets_do_not_snap_the_wrist():
     """Shadow on the built-in cylinder1/lateral_tripod: contacts switched on and off at full
-    weight, with nothing else in the way, move the retargeted wrist at up to 4.1 m/s (the
-    human's at most 0.7 m/s); a 0.1 s contact ramp keeps it below 2.5 m/s, and the default
-    frame-to-frame bound (``max_wrist_speed``) at 1.5 m/s."""
+    weight in every direction (``contact_tangent_weight`` 1), with nothing else in the way,
+    move the retargeted wrist at up to 4.1 m/s (the human's at most 0.7 m/s); a 0.1 s contact
+    ramp keeps it below 2.5 m/s, and the default frame-to-frame bound (``max_wrist_speed``) at
+    1.5 m/s."""
     from dexcanvas_core.loaders.selection import load_demonstration
 
     traj = load_demonstration("cylinder1/lateral_tripod")
     geom = object_geometry(traj.object.name)
     peak = {}
     for name, cfg in {
-        "free": RetargetConfig(max_wrist_speed=np.inf, keypoint_scaling="uniform"),
+        "free": RetargetConfig(
+            max_wrist_speed=np.inf, keypoint_scaling="uniform", contact_tangent_weight=1.0
+        ),
         "ramp": RetargetConfig(
-            max_wrist_speed=np.inf, keypoint_scaling="uniform", contact_ramp_s=0.1
+            max_wrist_speed=np.inf,
+            keypoint_scaling="uniform",
+            contact_tangent_weight=1.0,
+            contact_ramp_s=0.1,
         ),
         "default": RetargetConfig(),
     }.items():

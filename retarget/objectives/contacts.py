@@ -143,6 +143,12 @@ class SurfaceContactObjective(Objective):
         self.points = np.zeros((F, 3))
         self.parts = np.zeros(F, int)
         self.ramp = np.ones(F)
+        self.tangent_weight = 1.0
+        """Weight factor of the error's tangential part (along the object surface at the
+        target) relative to its normal part; 1: isotropic. Needs :meth:`set_contacts`'
+        ``normals``."""
+        self.normals: np.ndarray | None = None
+        self._frames = np.zeros((F, 3, 3))  # per finger rows n, t1, t2 (with normals)
         self._cache_q: np.ndarray | None = None
         self._cache: list[tuple[str, np.ndarray]] = []
         self._bodies = [
@@ -155,10 +161,13 @@ class SurfaceContactObjective(Objective):
         points_world: np.ndarray,
         parts: np.ndarray | None = None,
         ramp: np.ndarray | None = None,
+        normals: np.ndarray | None = None,
     ) -> None:
         """This frame's contacts: per finger, whether it touches, the surface point [m],
         (``parts``) which of its links touches (index into ``part_geoms[f]``; default 0, the
-        distal link) and (``ramp``, in [0, 1]) a factor on its weight (default 1)."""
+        distal link), (``ramp``, in [0, 1]) a factor on its weight (default 1) and
+        (``normals``) the object's outward unit normals at the points, which split the error
+        into its normal and tangential parts for :attr:`tangent_weight`."""
         a = np.asarray(active, bool)
         p = np.asarray(points_world, dtype=np.float64)
         F = len(self.finger_geoms)
@@ -175,6 +184,17 @@ class SurfaceContactObjective(Objective):
         if r.shape != (F,) or not (np.isfinite(r).all() and (r >= 0).all()):
             raise RetargetError(f"contacts: ramp must be ({F},) finite values >= 0, got {r}")
         self.active, self.points, self.parts, self.ramp = a, p, k, r
+        self.normals = None
+        if normals is not None and self.tangent_weight != 1.0:
+            n = np.asarray(normals, dtype=np.float64)
+            if n.shape != (F, 3) or not np.isfinite(n[a]).all():
+                raise RetargetError(f"contacts: normals must be ({F}, 3), finite where active")
+            self.normals = n
+            for i in np.flatnonzero(a).tolist():
+                u = n[i] / np.linalg.norm(n[i])
+                t1 = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
+                t1 /= np.linalg.norm(t1)
+                self._frames[i] = (u, t1, np.cross(u, t1))
         self._cache_q = None
 
     def finger_points(self, q: np.ndarray) -> list[tuple[str, np.ndarray]]:
@@ -215,14 +235,26 @@ class SurfaceContactObjective(Objective):
         pts = self.finger_points(q)
         return np.array([np.linalg.norm(p - t) for (_, p), t in zip(pts, self.points, strict=True)])
 
+    def _axis_weights(self) -> np.ndarray:
+        """(3,) weight factors of the error's three rows per contact."""
+        if self.normals is None:
+            return np.ones(3)
+        return np.array([1.0, self.tangent_weight, self.tangent_weight])
+
     def weights(self, m: int) -> np.ndarray:
-        return float(self.weight) * np.repeat(self.ramp[self.active], 3)
+        w = float(self.weight) * self.ramp[self.active][:, None] * self._axis_weights()
+        return w.reshape(-1)
 
     def error(self, state: RobotState) -> np.ndarray:
+        """Per active finger ``p_f − p_target`` (world axes; in the target's normal/tangent
+        frame when :meth:`set_contacts` got normals)."""
         if not self.active.any():
             return np.zeros(0)
-        pts = self.finger_points(state.q)
-        return np.concatenate([pts[i][1] - self.points[i] for i in np.flatnonzero(self.active)])
+        idx = np.flatnonzero(self.active)
+        e = self.finger_point_array(state.q)[idx] - self.points[idx]
+        if self.normals is not None:
+            e = np.einsum("kij,kj->ki", self._frames[idx], e)
+        return e.reshape(-1)
 
     def jacobian(self, state: RobotState) -> np.ndarray:
         if not self.active.any():
@@ -232,6 +264,8 @@ class SurfaceContactObjective(Objective):
         J = state.kin.point_jacobians(
             tuple(pts[i][0] for i in idx), self.finger_point_array(state.q)[idx]
         )
+        if self.normals is not None:
+            J = np.einsum("kij,kjv->kiv", self._frames[idx], J)
         return J.reshape(-1, state.nv)
 
     def qp_terms(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
@@ -243,7 +277,13 @@ class SurfaceContactObjective(Objective):
             return np.zeros((nv, nv)), np.zeros(nv)
         pts = self.finger_points(state.q)
         P = self.finger_point_array(state.q)[idx]
-        e = (P - self.points[idx]).reshape(-1)
-        J = state.kin.point_jacobians(tuple(pts[i][0] for i in idx.tolist()), P).reshape(-1, nv)
-        JW = J.T * (float(self.weight) * np.repeat(self.ramp[idx], 3))
-        return JW @ J, JW @ e
+        e = P - self.points[idx]
+        J = state.kin.point_jacobians(tuple(pts[i][0] for i in idx.tolist()), P)
+        if self.normals is not None:
+            R = self._frames[idx]
+            e = np.einsum("kij,kj->ki", R, e)
+            J = np.einsum("kij,kjv->kiv", R, J)
+        w = float(self.weight) * self.ramp[idx][:, None] * self._axis_weights()
+        J = J.reshape(-1, nv)
+        JW = J.T * w.reshape(-1)
+        return JW @ J, JW @ e.reshape(-1)
