@@ -8,8 +8,8 @@ PY=${PYTHON:-python3}
 
 # System packages of the renderers (retarget snapshot / report): headless Chromium for the
 # meshcat pages, EGL or OSMesa for MuJoCo's offscreen renderer. Installed only when missing,
-# as root, with apt; otherwise a note (the renderers' tests then fail, naming the package,
-# unless DEXCANVAS_ALLOW_MISSING_SYSTEM_PACKAGES=1: tests/system_packages.py).
+# as root, with apt; otherwise a note (the renderers' tests then fail, naming the package:
+# tests/system_packages.py).
 RENDER_PKGS="chromium libosmesa6 libegl1 libegl-mesa0 libgl1-mesa-dri"
 if command -v dpkg-query >/dev/null 2>&1; then
   missing=""
