@@ -28,9 +28,10 @@ import numpy as np
 from retarget.errors import RetargetError
 
 
-def _tangent_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit tangents ``t₁ = n × a / ‖n × a‖`` (``a`` a world axis away from ``n``) and
-    ``t₂ = n × t₁`` (scalar cross products: ``np.cross`` costs ~25 µs a call)."""
+def tangent_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit tangents of the unit normal ``n``: ``t₁ = n × a / ‖n × a‖`` (``a`` a world axis
+    away from ``n``) and ``t₂ = n × t₁`` (scalar cross products: ``np.cross`` costs ~25 µs a
+    call). Shared by the force QP's cones and the contact term's surface frames."""
     x, y, z = float(n[0]), float(n[1]), float(n[2])
     t1 = np.array([0.0, z, -y]) if abs(x) < 0.9 else np.array([-z, 0.0, x])  # n × x̂, n × ŷ
     t1 /= np.sqrt(t1 @ t1)
@@ -125,7 +126,7 @@ def distribute(
     cone = np.empty((k, n_facets + 1, 3))
     for i in range(k):
         u = -N_[i] / np.linalg.norm(N_[i])
-        t1, t2 = _tangent_basis(u)
+        t1, t2 = tangent_basis(u)
         cone[i, :n_facets] = (
             np.cos(angles)[:, None] * t1 + np.sin(angles)[:, None] * t2 - mu * c * u
         )

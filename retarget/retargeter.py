@@ -470,8 +470,8 @@ class Retargeter:
                 self.nq,
                 c.w_contacts,
                 part_geoms=part_geoms,
+                tangent_weight=c.contact_tangent_weight,
             )
-            self.contacts.tangent_weight = c.contact_tangent_weight
         q0 = hand.default_qpos(m)[: self.nq]
         self.q_default = q0
         finger_mask = np.ones(self.nq, bool)

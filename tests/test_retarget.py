@@ -220,7 +220,10 @@ def test_surface_contact_tangent_weight_scales_only_the_tangential_pull(demo):
     agree, and both equal that matrix built by hand)."""
     from retarget.objectives.base import Objective
 
-    rt = Retargeter(get_hand("shadow"), object_geometry("cube2"))
+    alpha = 0.2
+    rt = Retargeter(
+        get_hand("shadow"), object_geometry("cube2"), RetargetConfig(contact_tangent_weight=alpha)
+    )
     tg = rt.human_targets(demo)
     t = int(np.flatnonzero(tg["contact_active"].sum(axis=1) >= 2)[0])
     rt.scene.set_object_pose(demo.object.pos[t], demo.object.rot_aa[t])
@@ -230,8 +233,6 @@ def test_surface_contact_tangent_weight_scales_only_the_tangential_pull(demo):
     q[:6] = [*tg["wrist_p"][t], 0.1, -0.2, 0.3]
     rt.kin.forward(q)
     s = RobotState(q=q, kin=rt.kin)
-    alpha = 0.2
-    rt.contacts.tangent_weight = alpha
     rt.contacts.set_contacts(active, tg["contact_points"][t], tg["contact_part"][t], normals=n)
     H, c = rt.contacts.qp_terms(s)
     H0, c0 = Objective.qp_terms(rt.contacts, s)

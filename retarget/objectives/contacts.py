@@ -117,9 +117,13 @@ class SurfaceContactObjective(Objective):
         hand_nq: int,
         weight: float = 1.0,
         part_geoms=None,
+        tangent_weight: float = 1.0,
     ):
         super().__init__(weight)
         import mujoco
+
+        if not (np.isfinite(tangent_weight) and tangent_weight >= 0):
+            raise RetargetError(f"contacts: tangent_weight must be >= 0, got {tangent_weight}")
 
         self._mj = mujoco
         self.model, self.data = model, data
@@ -143,12 +147,12 @@ class SurfaceContactObjective(Objective):
         self.points = np.zeros((F, 3))
         self.parts = np.zeros(F, int)
         self.ramp = np.ones(F)
-        self.tangent_weight = 1.0
+        self.tangent_weight = tangent_weight
         """Weight factor of the error's tangential part (along the object surface at the
         target) relative to its normal part; 1: isotropic. Needs :meth:`set_contacts`'
         ``normals``."""
-        self.normals: np.ndarray | None = None
-        self._frames = np.zeros((F, 3, 3))  # per finger rows n, t1, t2 (with normals)
+        self._split = False  # this frame's errors are in the targets' surface frames
+        self._frames = np.zeros((F, 3, 3))  # per finger rows n, t1, t2 (when split)
         self._cache_q: np.ndarray | None = None
         self._cache: list[tuple[str, np.ndarray]] = []
         self._bodies = [
@@ -184,22 +188,16 @@ class SurfaceContactObjective(Objective):
         if r.shape != (F,) or not (np.isfinite(r).all() and (r >= 0).all()):
             raise RetargetError(f"contacts: ramp must be ({F},) finite values >= 0, got {r}")
         self.active, self.points, self.parts, self.ramp = a, p, k, r
-        self.normals = None
-        if normals is not None and self.tangent_weight != 1.0:
+        self._split = normals is not None and self.tangent_weight != 1.0
+        if self._split:
+            from retarget.force_matching import tangent_basis
+
             n = np.asarray(normals, dtype=np.float64)
             if n.shape != (F, 3) or not np.isfinite(n[a]).all():
                 raise RetargetError(f"contacts: normals must be ({F}, 3), finite where active")
-            self.normals = n
             for i in np.flatnonzero(a).tolist():
                 u = n[i] / np.linalg.norm(n[i])
-                x, y, z = u.tolist()
-                # t₁ = u × x̂ (or u × ŷ near x̂), t₂ = u × t₁; scalar products (np.cross costs
-                # ~22 µs a call, two per contact and frame)
-                t1 = np.array([0.0, z, -y]) if abs(x) < 0.9 else np.array([-z, 0.0, x])
-                t1 /= np.linalg.norm(t1)
-                a1, b1, c1 = t1.tolist()
-                t2 = np.array([y * c1 - z * b1, z * a1 - x * c1, x * b1 - y * a1])
-                self._frames[i] = (u, t1, t2)
+                self._frames[i] = (u, *tangent_basis(u))
         self._cache_q = None
 
     def finger_points(self, q: np.ndarray) -> list[tuple[str, np.ndarray]]:
@@ -240,15 +238,14 @@ class SurfaceContactObjective(Objective):
         pts = self.finger_points(q)
         return np.array([np.linalg.norm(p - t) for (_, p), t in zip(pts, self.points, strict=True)])
 
-    def _axis_weights(self) -> np.ndarray:
-        """(3,) weight factors of the error's three rows per contact."""
-        if self.normals is None:
-            return np.ones(3)
-        return np.array([1.0, self.tangent_weight, self.tangent_weight])
-
     def weights(self, m: int) -> np.ndarray:
-        w = float(self.weight) * self.ramp[self.active][:, None] * self._axis_weights()
-        return w.reshape(-1)
+        axes = [1.0, self.tangent_weight, self.tangent_weight] if self._split else [1.0] * 3
+        return (float(self.weight) * self.ramp[self.active][:, None] * axes).reshape(-1)
+
+    def _in_surface_frames(self, idx: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Per-contact vectors ``(k, 3)`` or Jacobians ``(k, 3, nv)`` of the fingers ``idx``,
+        in their targets' (normal, t₁, t₂) frames when this frame's errors are split."""
+        return np.einsum("kij,kj...->ki...", self._frames[idx], x) if self._split else x
 
     def error(self, state: RobotState) -> np.ndarray:
         """Per active finger ``p_f − p_target`` (world axes; in the target's normal/tangent
@@ -257,21 +254,17 @@ class SurfaceContactObjective(Objective):
             return np.zeros(0)
         idx = np.flatnonzero(self.active)
         e = self.finger_point_array(state.q)[idx] - self.points[idx]
-        if self.normals is not None:
-            e = np.einsum("kij,kj->ki", self._frames[idx], e)
-        return e.reshape(-1)
+        return self._in_surface_frames(idx, e).reshape(-1)
 
     def jacobian(self, state: RobotState) -> np.ndarray:
         if not self.active.any():
             return np.zeros((0, state.nv))
         pts = self.finger_points(state.q)
-        idx = np.flatnonzero(self.active).tolist()
+        idx = np.flatnonzero(self.active)
         J = state.kin.point_jacobians(
-            tuple(pts[i][0] for i in idx), self.finger_point_array(state.q)[idx]
+            tuple(pts[i][0] for i in idx.tolist()), self.finger_point_array(state.q)[idx]
         )
-        if self.normals is not None:
-            J = np.einsum("kij,kjv->kiv", self._frames[idx], J)
-        return J.reshape(-1, state.nv)
+        return self._in_surface_frames(idx, J).reshape(-1, state.nv)
 
     def qp_terms(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`error` and :meth:`jacobian` in one pass over the active fingers (the same
@@ -282,13 +275,8 @@ class SurfaceContactObjective(Objective):
             return np.zeros((nv, nv)), np.zeros(nv)
         pts = self.finger_points(state.q)
         P = self.finger_point_array(state.q)[idx]
-        e = P - self.points[idx]
+        e = self._in_surface_frames(idx, P - self.points[idx]).reshape(-1)
         J = state.kin.point_jacobians(tuple(pts[i][0] for i in idx.tolist()), P)
-        if self.normals is not None:
-            R = self._frames[idx]
-            e = np.einsum("kij,kj->ki", R, e)
-            J = np.einsum("kij,kjv->kiv", R, J)
-        w = float(self.weight) * self.ramp[idx][:, None] * self._axis_weights()
-        J = J.reshape(-1, nv)
-        JW = J.T * w.reshape(-1)
-        return JW @ J, JW @ e.reshape(-1)
+        J = self._in_surface_frames(idx, J).reshape(-1, nv)
+        JW = J.T * self.weights(e.size)
+        return JW @ J, JW @ e
