@@ -92,6 +92,10 @@ class ContactSweep:
         stays the same."""
         self._none_i, self._none_f, self._none_3 = np.zeros(0, int), np.zeros(0), np.zeros((0, 3))
         self._none_b = np.zeros(0, bool)
+        self._one_b = np.ones(1, bool)
+        self._one_b.flags.writeable = False
+        self._warn = data.warning[mujoco.mjtWarning.mjWARN_CONTACTFULL]  # a live view
+        self._lut_stride = np.array([model.ngeom, 1])  # (geom1, geom2) → geom1·ngeom + geom2
         # Registered pairs (all limits on this sweep): (geom, geom) → registered pair index.
         self._lut = np.full(model.ngeom * model.ngeom, -1, dtype=int)
         self._ga = np.zeros(0, int)
@@ -146,7 +150,7 @@ class ContactSweep:
             return
         d.qpos[: self.hand_nq] = q
         mujoco.mj_kinematics(self.model, d)
-        warn = d.warning[mujoco.mjtWarning.mjWARN_CONTACTFULL]
+        warn = self._warn
         full = warn.number
         mujoco.mj_collision(self.model, d)
         if warn.number != full:
@@ -158,30 +162,32 @@ class ContactSweep:
         self._key = key
         self.version += 1
         c = d.contact
-        geom = c.geom.reshape(-1, 2)
-        pair = self._lut[geom[:, 0] * self.model.ngeom + geom[:, 1]]
-        sel = np.flatnonzero(pair >= 0)
+        geom = c.geom
+        pair = self._lut[geom @ self._lut_stride]
+        sel = (pair >= 0).nonzero()[0]
         if not sel.size:
             self.pair, self.dist, self.closest = self._none_i, self._none_f, self._none_b
             self.p_a = self.p_b = self.normal = self._none_3
             return
-        dist = c.dist.reshape(-1)
+        dist = c.dist
         ps = pair[sel]
-        first = np.ones(sel.size, bool)
         if sel.size > 1:
             order = np.lexsort((dist[sel], ps))
             ps, k = ps[order], sel[order]
+            first = np.empty(sel.size, bool)
+            first[0] = True
             np.not_equal(ps[1:], ps[:-1], out=first[1:])
         else:
-            k = sel
-        self.pair, self.dist, self.closest = ps, dist[k], first
+            k, first = sel, self._one_b
+        dk = dist[k]
+        self.pair, self.dist, self.closest = ps, dk, first
         # Surface points: the contact position ∓ d/2 along its normal (geom[0] → geom[1]);
         # swapped where the contact lists the pair's geoms the other way round.
-        n = c.frame.reshape(-1, 9)[k, :3]
-        sign = np.where(geom[k, 0] == self._ga[ps], 0.5, -0.5)[:, None]
-        half = (sign * self.dist[:, None]) * n
-        pos = c.pos.reshape(-1, 3)[k]
-        self.normal = 2.0 * sign * n
+        sign = (geom[k, 0] == self._ga[ps]) - 0.5  # ±0.5
+        n = c.frame[k, :3]
+        half = (sign * dk)[:, None] * n
+        pos = c.pos[k]
+        self.normal = (2.0 * sign)[:, None] * n
         self.p_a = pos - half
         self.p_b = pos + half
 
@@ -325,6 +331,7 @@ class CollisionLimit(Limit):
         )
         self.sweep = sweep
         self._cached: tuple[int, PairDistances] | None = None  # (sweep version, query's answer)
+        self._maps: tuple[np.ndarray, np.ndarray] | None = None  # see _sweep_maps
         if sweep is not None:
             if sweep.model is not model or sweep.data is not data:
                 raise RetargetError("the contact sweep must run on the limit's own model and data")
@@ -418,14 +425,27 @@ class CollisionLimit(Limit):
         p_a, p_b = pts[keep, :3], pts[keep, 3:]
         return PairDistances(idx[keep], dist[keep], p_a, p_b, _normals(dist[keep], p_a, p_b))
 
+    def _sweep_maps(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per pair registered on the sweep, this limit's pair index (-1: another limit's or
+        not this one's): for the swept pairs only, and for the swept and per-pair pairs (the
+        sweep's registrations can grow after this limit's, so rebuilt when they do)."""
+        n = self.sweep._ga.size
+        if self._maps is None or self._maps[0].size != n:
+            swept = np.full(n, -1)
+            swept[self._offset : self._offset + self._swept.size] = self._swept
+            every = swept.copy()
+            every[self._direct_offset : self._direct_offset + self._direct_seen.size] = (
+                self._direct_seen
+            )
+            self._maps = (swept, every)
+        return self._maps
+
     def _query_sweep(self) -> PairDistances:
         """The swept pairs' closest contacts within ``distmax`` (after ``sweep.update``)."""
         sw = self.sweep
-        i = sw.pair - self._offset
-        k = np.flatnonzero(
-            (i >= 0) & (i < self._swept.size) & sw.closest & (sw.dist < self.distmax)
-        )
-        return PairDistances(self._swept[i[k]], sw.dist[k], sw.p_a[k], sw.p_b[k], sw.normal[k])
+        i = self._sweep_maps()[0][sw.pair]
+        k = ((i >= 0) & sw.closest & (sw.dist < self.distmax)).nonzero()[0]
+        return PairDistances(i[k], sw.dist[k], sw.p_a[k], sw.p_b[k], sw.normal[k])
 
     def distances(self, q: np.ndarray) -> list[tuple[int, int, float, np.ndarray, np.ndarray]]:
         """``(geom_a, geom_b, d, p_a, p_b)`` for every pair within ``distmax`` at ``q``."""
@@ -444,14 +464,10 @@ class CollisionLimit(Limit):
         """The sweep's contacts within ``distmax`` other than each pair's closest (after an
         update at the current ``q``); for the per-pair pairs, all of theirs."""
         sw = self.sweep
-        index = np.full(sw.pair.size, -1)  # the limit's pair of each sweep contact (-1: none)
-        i = sw.pair - self._offset
-        swept = (i >= 0) & (i < self._swept.size)
-        index[swept] = self._swept[i[swept]]
-        j = sw.pair - self._direct_offset
-        direct = (j >= 0) & (j < self._direct_seen.size)
-        index[direct] = self._direct_seen[j[direct]]
-        k = np.flatnonzero(((swept & ~sw.closest) | direct) & (sw.dist < self.distmax))
+        swept, every = self._sweep_maps()
+        index = every[sw.pair]  # the limit's pair of each sweep contact (-1: none)
+        closest_swept = sw.closest & (swept[sw.pair] >= 0)  # already a query() row
+        k = ((index >= 0) & ~closest_swept & (sw.dist < self.distmax)).nonzero()[0]
         if not k.size:
             return self._empty
         return PairDistances(index[k], sw.dist[k], sw.p_a[k], sw.p_b[k], sw.normal[k])
@@ -508,7 +524,7 @@ class CollisionLimit(Limit):
 
     def inequalities(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         r = self.row_points(state.q)
-        self._near = np.unique(r.index[r.distance < self.NEAR])
+        self._near = np.array(sorted(set(r.index[r.distance < self.NEAR].tolist())), dtype=int)
         if not r.distance.size:
             return np.zeros((0, state.nv)), np.zeros(0)
         n = r.normal

@@ -22,14 +22,20 @@ class JointLimit(Limit):
         )
 
     def bounds(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
-        idx = np.flatnonzero(self.limited)
-        q = state.q[idx]
-        lb = np.full(state.nv, -np.inf)
-        ub = np.full(state.nv, np.inf)
+        # Unlimited joints get ∓inf (their range read as ∓inf: max(inf − q, 0) = inf).
+        lo, hi = self._ranges()
+        q = state.q
         # Clip so that a start slightly outside the range still gives a feasible QP.
-        ub[idx] = np.maximum(self.upper[idx] - q, 0.0)
-        lb[idx] = -np.maximum(q - self.lower[idx], 0.0)
-        return lb, ub
+        return -np.maximum(q - lo, 0.0), np.maximum(hi - q, 0.0)
+
+    def _ranges(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(lower, upper)`` with ∓inf for unlimited joints, memoised on the attributes."""
+        key = (self.lower.tobytes(), self.upper.tobytes(), self.limited.tobytes())
+        if getattr(self, "_key", None) != key:
+            self._key = key
+            self._lo = np.where(self.limited, self.lower, -np.inf)
+            self._hi = np.where(self.limited, self.upper, np.inf)
+        return self._lo, self._hi
 
 
 class VelocityLimit(Limit):
@@ -42,7 +48,7 @@ class VelocityLimit(Limit):
 
     def bounds(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         v = np.broadcast_to(np.asarray(self.v_max, dtype=np.float64), (state.nv,)) * state.dt
-        return -v, v.copy()
+        return -v, v
 
 
 class FrameSpeedLimit(Limit):
@@ -67,11 +73,11 @@ class FrameSpeedLimit(Limit):
             )
 
     def bounds(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
-        band = self.v_max * state.dt
         off = self.q_prev - state.q
-        lb = np.full(state.nv, -np.inf)
-        ub = np.full(state.nv, np.inf)
-        idx = np.flatnonzero(np.isfinite(band))
-        lb[idx] = np.minimum(off[idx] - band[idx], 0.0)
-        ub[idx] = np.maximum(off[idx] + band[idx], 0.0)
-        return lb, ub
+        if state.dt > 0:  # unbounded joints: band inf, bounds ∓inf
+            band = self.v_max * state.dt
+            return np.minimum(off - band, 0.0), np.maximum(off + band, 0.0)
+        band = np.full(self.v_max.shape, np.inf)  # inf · 0 would be NaN
+        f = np.isfinite(self.v_max)
+        band[f] = self.v_max[f] * state.dt
+        return np.minimum(off - band, 0.0), np.maximum(off + band, 0.0)
