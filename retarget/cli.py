@@ -97,6 +97,16 @@ def _hands_config(args: argparse.Namespace) -> HandsConfig:
 # ---------------------------------------------------------------------------- retarget run
 
 
+def _non_negative_int(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}")
+    return n
+
+
 def _add_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hand", required=True, help="robot hand (see `retarget hands`)")
     p.add_argument("--pair", required=True, help="OBJECT/TYPE, e.g. cube2/tripod")
@@ -123,6 +133,14 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
         "--refine",
         action="store_true",
         help="if the re-simulation fails, refine the commands by sampling MPC on the robot",
+    )
+    p.add_argument(
+        "--refine-retries",
+        type=_non_negative_int,
+        default=2,
+        metavar="N",
+        help="times the refinement backtracks 0.5 s (× attempt) when it loses the object "
+        "(default 2; 0: one attempt)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     p.add_argument(
@@ -166,6 +184,7 @@ def _plain_run_config(args: argparse.Namespace):
         backend=args.backend,
         forces=args.forces,
         refine=args.refine,
+        refine_retries=args.refine_retries,
         progress=not args.quiet,
     )
 

@@ -52,6 +52,8 @@ class RunConfig:
     """When the re-simulation fails, run the physics refinement (``retarget.refine``: the
     force pipeline's sampling MPC on the robot hand) and report it next to the open-loop
     result."""
+    refine_retries: int = 2
+    """How often the refinement backtracks when it loses the object (``RefineConfig.retries``)."""
     progress: bool = True
     """Show progress bars and the summary on the terminal."""
 
@@ -277,7 +279,10 @@ def run_retarget(cfg: RunConfig) -> dict:
     if cfg.refine and not sim.success:
         from retarget.refine import RefineConfig, refine
 
-        rcfg = RefineConfig(contact_timeconst=FORCE_CONTACT_TIMECONST if cfg.forces else None)
+        rcfg = RefineConfig(
+            contact_timeconst=FORCE_CONTACT_TIMECONST if cfg.forces else None,
+            retries=cfg.refine_retries,
+        )
         with _Progress(cfg.progress) as prog:
             task = prog.task("refining (MPC on the robot)", 1)
             refined = refine(hand, geometry, traj, robot, retargeter.tip_sites, rcfg)
@@ -419,7 +424,8 @@ def _print_summary(m: dict, out_dir: Path) -> None:
             "physics refinement",
             f"{ok}: object error max {100 * r['object_pos_err_max_m']:.1f} cm; commands moved "
             f"{np.degrees(r['finger_ctrl_deviation_mean_rad']):.1f}° (fingers), "
-            f"{1000 * r['wrist_pos_deviation_mean_m']:.1f} mm (wrist)",
+            f"{1000 * r['wrist_pos_deviation_mean_m']:.1f} mm (wrist); "
+            f"{r['attempts']} attempt{'s' if r['attempts'] > 1 else ''}, {r['compute_s']:.1f} s",
         )
     t.add_row("speed", f"{m['ms_per_frame']:.2f} ms/frame ({m['backend']})")
     t.add_row("written", f"{out_dir}/robot_trajectory.npz, metrics.json")

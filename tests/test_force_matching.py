@@ -289,6 +289,55 @@ def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
         refine(hand, geo, demo, robot, rt.tip_sites, RefineConfig(tracker="ppo"))
 
 
+def test_refinement_backtracking_resumes_exactly_from_its_checkpoints():
+    """A checkpoint restored and replayed with the same residuals reproduces the physics (the
+    backtracking resumes from the state it saved, not an approximation of it); a refinement
+    that keeps losing the object uses every retry and reports them; bad settings are refused."""
+    from dataclasses import replace
+
+    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.loaders.selection import load_demonstration
+    from dexcanvas_core.sim.tracker import SamplingMPC
+    from retarget.hands import get_hand
+    from retarget.refine import RefineConfig, _checkpoint, _restore, _tracking_env, refine
+    from retarget.retargeter import Retargeter
+
+    demo = load_demonstration("cube2/tripod").slice(250, 310)
+    hand, geo = get_hand("allegro"), object_geometry("cube2")
+    rt = Retargeter(hand, geo)
+    robot = rt.retarget(demo)
+    cfg = RefineConfig()
+    env, _, _ = _tracking_env(hand, geo, demo, robot, rt.tip_sites, cfg)
+    mpc = SamplingMPC(cfg.mpc)
+    env.reset()
+    mpc.reset(env)
+    rng = np.random.default_rng(0)
+    actions = rng.normal(0.0, 0.05, (40, env.action_dim))
+    for a in actions[:10]:
+        env.step(a)
+    cp = _checkpoint(env, mpc)
+    for a in actions[10:]:
+        env.step(a)
+    first = np.array(env.log.object_pos), np.array(env.log.hand_qpos)
+    _restore(env, mpc, cp)
+    assert env.t == 10 and len(env.log.pos_err) == 11 and env.failed_at is None
+    for a in actions[10:]:
+        env.step(a)
+    np.testing.assert_array_equal(np.array(env.log.object_pos), first[0])
+    np.testing.assert_array_equal(np.array(env.log.hand_qpos), first[1])
+
+    # an object error bound nothing meets: every attempt fails, each resumes further back
+    strict = replace(cfg, tracking=replace(cfg.tracking, fail_pos_m=1e-9), retries=2)
+    res = refine(hand, geo, demo, robot, rt.tip_sites, strict)
+    assert not res.success and res.attempts == 3 and res.metrics()["attempts"] == 3
+    assert res.object_pos_err.shape[0] == res.ctrl.shape[0] == res.failed_at_frame + 1
+    once = refine(hand, geo, demo, robot, rt.tip_sites, replace(strict, retries=0))
+    assert once.attempts == 1 and once.compute_s < res.compute_s
+    for bad in ({"retries": -1}, {"backtrack_s": 0.0}, {"retry_samples": 0.5}):
+        with pytest.raises(RetargetError, match="backtracking"):
+            refine(hand, geo, demo, robot, rt.tip_sites, replace(cfg, **bad))
+
+
 def test_refinement_runs_on_a_gripper_whose_fingers_are_shared():
     """The panda gripper drives index and middle with one finger: one tip site, listed twice."""
     from dexcanvas_core.demos.geometry import object_geometry

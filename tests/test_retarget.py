@@ -333,6 +333,13 @@ def test_cli_run_errors(argv, message, small_dataset, capsys):
     assert "retarget run: error:" in err and message in err
 
 
+def test_cli_run_refuses_negative_refine_retries(capsys):
+    with pytest.raises(SystemExit) as e:  # argparse's usage error
+        main(["run", "--hand", "shadow", "--pair", "cube2/tripod", "--refine-retries", "-1"])
+    assert e.value.code == 2
+    assert "--refine-retries: expected a whole number >= 0, got '-1'" in capsys.readouterr().err
+
+
 def test_cli_run_pair_missing_from_dataset(small_dataset, capsys):
     rc = main(
         [
