@@ -219,11 +219,10 @@ def refine(hand, geometry, human, robot, tip_sites: list[str], cfg: RefineConfig
     env, act_q, ctrl_ref = _tracking_env(hand, geometry, human, robot, tip_sites, cfg)
     m, T = env.scene.model, human.num_frames
     t0 = time.process_time()
-    if cfg.tracker == "mpc" and cfg.retries > 0:
+    if cfg.tracker == "mpc":
         log, attempts = _track_backtracking(env, cfg)
     else:
-        log = track(env, SamplingMPC(cfg.mpc) if cfg.tracker == "mpc" else OpenLoop())
-        attempts = 1
+        log, attempts = track(env, OpenLoop()), 1
     cpu = time.process_time() - t0
     ctrl = np.asarray(log.ctrl)
     Tt = ctrl.shape[0]
@@ -329,11 +328,12 @@ def _restore(env: TrackingEnv, mpc: SamplingMPC, c: _Checkpoint) -> None:
 
 
 def _track_backtracking(env: TrackingEnv, cfg: RefineConfig) -> tuple[object, int]:
-    """The sampling MPC with backtracking (``RefineConfig.retries``): ``(log, attempts)``.
+    """The sampling MPC (the core's ``track`` loop) with backtracking
+    (``RefineConfig.retries``; 0: plain tracking): ``(log, attempts)``.
 
-    The object is usually lost a few tenths of a second after the grip went wrong (at
-    lift-off), so attempt ``k`` resumes from the last checkpoint ``k · backtrack_s`` before the
-    failure, with a new random stream and ``retry_samples^k`` × the samples."""
+    Failing (d) replays mostly lose the object 0.15–0.3 s after the human's lift-off (README,
+    force preservation), so attempt ``k`` resumes from the last checkpoint ``k · backtrack_s``
+    before the failure, with a new random stream and ``retry_samples^k`` × the samples."""
     mpc = SamplingMPC(cfg.mpc)
     env.reset()
     mpc.reset(env)
@@ -342,13 +342,13 @@ def _track_backtracking(env: TrackingEnv, cfg: RefineConfig) -> tuple[object, in
     attempts = 1
     while True:
         while not env.done:
-            if env.t % every == 0:
+            if cfg.retries and env.t % every == 0:
                 snaps[env.t] = _checkpoint(env, mpc)
             env.step(mpc.act(env))
         if env.failed_at is None or attempts > cfg.retries:
             return env.log, attempts
         back = env.failed_at - round(attempts * cfg.backtrack_s * env.ref.fps)
-        t_back = max((t for t in snaps if t <= back), default=min(snaps))
+        t_back = max((t for t in snaps if t <= back), default=0)  # frame 0 is always kept
         _restore(env, mpc, snaps[t_back])
         for t in [t for t in snaps if t > t_back]:
             del snaps[t]

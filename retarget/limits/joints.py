@@ -74,10 +74,10 @@ class FrameSpeedLimit(Limit):
 
     def bounds(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         off = self.q_prev - state.q
-        if state.dt > 0:  # unbounded joints: band inf, bounds ∓inf
+        # Unbounded joints: band inf, bounds ∓inf (at dt = 0 the finite bands are 0, inf · 0
+        # would be NaN).
+        if state.dt > 0:
             band = self.v_max * state.dt
-            return np.minimum(off - band, 0.0), np.maximum(off + band, 0.0)
-        band = np.full(self.v_max.shape, np.inf)  # inf · 0 would be NaN
-        f = np.isfinite(self.v_max)
-        band[f] = self.v_max[f] * state.dt
+        else:
+            band = np.where(np.isfinite(self.v_max), 0.0, np.inf)
         return np.minimum(off - band, 0.0), np.maximum(off + band, 0.0)
