@@ -108,6 +108,46 @@ def atomic_write_json(path: Path, obj) -> None:
     os.replace(tmp, path)
 
 
+def parse_override(text: str) -> tuple[str, object]:
+    """``"name=value"`` → ``(name, value)``, the value a Python literal (``2``, ``True``,
+    ``(0.001, 0.004)``, ``None``); an ``argparse`` type for ``--set``."""
+    import argparse
+    import ast
+
+    name, sep, value = text.partition("=")
+    if not sep or not name.strip():
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    try:
+        return name.strip(), ast.literal_eval(value.strip())
+    except (ValueError, SyntaxError):
+        raise argparse.ArgumentTypeError(
+            f"{name.strip()}: {value.strip()!r} is not a Python literal (e.g. 2.0, True, None)"
+        ) from None
+
+
+def config_overrides(pairs, config_cls) -> dict:
+    """``--set`` pairs ``[(name, value)]`` as keyword arguments of the dataclass
+    ``config_cls``: an unknown name, or values its ``validate()`` refuses, exit with the
+    message before any run."""
+    import dataclasses
+
+    fields = {f.name for f in dataclasses.fields(config_cls)}
+    out = dict(pairs or ())
+    bad = sorted(set(out) - fields)
+    if bad:
+        raise SystemExit(
+            f"--set: unknown {config_cls.__name__} field(s) {', '.join(bad)}; available: "
+            f"{', '.join(sorted(fields))}"
+        )
+    try:
+        cfg = config_cls(**out)
+        if hasattr(cfg, "validate"):
+            cfg.validate()
+    except Exception as e:  # the config's own checks, e.g. a negative weight
+        raise SystemExit(f"--set: {config_cls.__name__} refuses {out}: {e}") from None
+    return out
+
+
 # ------------------------------------------------------------------ the group-spread suite
 def select_pairs(pairs) -> list:
     """The order in which pairs are taken, spreading them over the four groups deterministically.

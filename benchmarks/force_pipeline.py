@@ -75,7 +75,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from _common import atomic_write_json, generate_one, operator_for, pick_pairs, progress_bar
+from _common import (
+    atomic_write_json,
+    generate_one,
+    operator_for,
+    parse_override,
+    pick_pairs,
+    progress_bar,
+)
 
 DEFAULT_OUT = Path(__file__).parent / "results" / "force_pipeline.json"
 PLOTS_DIR = "force_plots"
@@ -179,22 +186,6 @@ def tracking_config(cfg: BenchConfig):
                 f"{k} takes a number{' or None' if optional else ''}, got {v!r}", field="tracking"
             )
     return dataclasses.replace(defaults, **dict(cfg.tracking))
-
-
-def parse_override(text: str) -> tuple[str, object]:
-    """``"name=value"`` → ``(name, value)``, the value a Python literal (``2``, ``True``,
-    ``(0.001, 0.004)``, ``None``)."""
-    import ast
-
-    name, sep, value = text.partition("=")
-    if not sep or not name.strip():
-        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
-    try:
-        return name.strip(), ast.literal_eval(value.strip())
-    except (ValueError, SyntaxError):
-        raise argparse.ArgumentTypeError(
-            f"{name.strip()}: {value.strip()!r} is not a Python literal (e.g. 2.0, True, None)"
-        ) from None
 
 
 # ------------------------------------------------------------------------------------- plan

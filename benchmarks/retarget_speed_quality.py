@@ -51,11 +51,19 @@ import platform
 import sys
 import time
 import traceback
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
-from _common import atomic_write_json, load_demonstrations, progress_bar, resim, versions
+from _common import (
+    atomic_write_json,
+    config_overrides,
+    load_demonstrations,
+    parse_override,
+    progress_bar,
+    resim,
+    versions,
+)
 
 DEFAULT_OUT = Path(__file__).parent / "results" / "retarget_speed_quality.json"
 OURS, OURS_Q, DEX = "ours", "ours (no squeeze)", "dex-retargeting"
@@ -84,6 +92,8 @@ class BenchConfig:
     seed: int = 0
     dex_wrist: str = "free"
     """dex-retargeting's wrist: ``free`` (optimised) or ``fixed`` (the human wrist pose)."""
+    overrides: dict = field(default_factory=dict)
+    """``RetargetConfig`` fields of ours changed from their defaults (``--set KEY=VALUE``)."""
 
     def validate(self) -> BenchConfig:
         if self.n_pairs < 1:
@@ -121,7 +131,7 @@ def _timed_solves(rt):
     return acc
 
 
-def run_one(hand, pair, traj, baseline) -> list[dict]:
+def run_one(hand, pair, traj, baseline, overrides: dict | None = None) -> list[dict]:
     """Both methods on one hand × pair: three rows (ours on q_command and q, dex-retargeting)."""
     from dexcanvas_core.demos.geometry import object_geometry
     from retarget.baselines import KinematicMetrics, measure_trajectory
@@ -136,7 +146,7 @@ def run_one(hand, pair, traj, baseline) -> list[dict]:
         "frames": traj.num_frames,
         "uuid": traj.uuid,
     }
-    rt = Retargeter(hand, geom, RetargetConfig(backend="pinocchio"))
+    rt = Retargeter(hand, geom, RetargetConfig(**{"backend": "pinocchio", **(overrides or {})}))
     solve = _timed_solves(rt)
     robot = rt.retarget(traj)
     ours_km = KinematicMetrics.of(robot).summary()
@@ -358,7 +368,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
                     baselines[hand.name] = DexRetargetingBaseline(
                         hand, DexRetargetingConfig(wrist=cfg.dex_wrist)
                     )
-                rows.extend(run_one(hand, pair, traj, baselines[hand.name]))
+                rows.extend(run_one(hand, pair, traj, baselines[hand.name], cfg.overrides))
             except Exception as e:  # recorded in the JSON and counted in the tables
                 err = f"{type(e).__name__}: {e}"
                 console.print(f"[red]{hand.name} · {pair}: {err}[/red]")
@@ -443,14 +453,26 @@ def main(argv: list[str] | None = None) -> int:
         default="free",
         help="dex-retargeting's wrist: optimised (free) or the human wrist pose",
     )
+    ap.add_argument(
+        "--set",
+        action="append",
+        type=parse_override,
+        default=[],
+        metavar="NAME=VALUE",
+        help="change a RetargetConfig field of ours (repeatable), e.g. --set w_posture=0",
+    )
     a = ap.parse_args(argv)
+    from retarget.retargeter import RetargetConfig
+
+    overrides = config_overrides(a.set, RetargetConfig)
     hands = tuple(a.hands) if a.hands else None
     n_pairs = a.n_pairs
     if a.quick:
         hands = hands[:1] if hands else ("allegro",)
         n_pairs = min(n_pairs, 2)
     cfg = BenchConfig(hands=hands, n_pairs=n_pairs, max_frames=a.max_frames, out=a.out,
-                      operator=a.operator, seed=a.seed, dex_wrist=a.dex_wrist)  # fmt: skip
+                      operator=a.operator, seed=a.seed, dex_wrist=a.dex_wrist,
+                      overrides=overrides)  # fmt: skip
     run_benchmark(cfg)
     return 0
 

@@ -47,3 +47,24 @@ def test_overrides_reach_the_tracking_config():
 def test_bad_overrides_fail_before_any_run(override, message):
     with pytest.raises(ValidationError, match=message):
         BenchConfig(tracking=(override,)).validate()
+
+
+def test_retarget_benchmark_set_checks_names_and_values_before_any_run():
+    """``benchmarks/retarget_speed_quality.py --set``: RetargetConfig ablations of ours."""
+    import retarget_speed_quality as bench
+    from _common import config_overrides
+
+    from retarget.retargeter import RetargetConfig
+
+    pairs = [parse_override("w_posture=1e-5"), parse_override("use_self_collision=False")]
+    assert config_overrides(pairs, RetargetConfig) == {
+        "w_posture": 1e-5,
+        "use_self_collision": False,
+    }
+    for argv, message in (
+        (["--set", "w_postur=0"], "unknown RetargetConfig field"),
+        (["--set", "w_posture=-1"], "must be finite and >= 0"),
+        (["--set", "grip='squeeze'"], "unknown grip"),
+    ):
+        with pytest.raises(SystemExit, match=message):
+            bench.main([*argv, "--out", "/nonexistent/never-written.json"])
