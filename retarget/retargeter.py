@@ -868,13 +868,15 @@ class Retargeter:
         active_all = np.asarray(tg["contact_active"], bool)
         has_obj = self.geometry is not None and bool(traj.objects)
         obj_geoms = set(self.scene.object_geoms)
+        obj_quat = aa_to_quat_wxyz(traj.object.rot_aa) if has_obj else None
+        tip_sites, kp_sites = tuple(self.tip_sites), tuple(self.kp_sites)
         for t in range(T):
             q = Q[t]
             if has_obj:
-                self.scene.set_object_pose(traj.object.pos[t], traj.object.rot_aa[t])
+                self.scene.set_object_pose(traj.object.pos[t], quat_wxyz=obj_quat[t])
             self.kin.forward(q)
-            tips[t] = [self.kin.site_position(s) for s in self.tip_sites]
-            robot_kp = np.stack([self.kin.site_position(s) for s in self.kp_sites])
+            tips[t] = self.kin.site_positions(tip_sites)
+            robot_kp = self.kin.site_positions(kp_sites)
             kp_err[t] = float(np.mean(np.linalg.norm(robot_kp - tg["keypoints"][t], axis=1)))
             if self.distance_query is not None:
                 d = self.distance_query.distances(q)
