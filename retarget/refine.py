@@ -352,7 +352,9 @@ def _track_backtracking(env: TrackingEnv, cfg: RefineConfig) -> tuple[object, in
         _restore(env, mpc, snaps[t_back])
         for t in [t for t in snaps if t > t_back]:
             del snaps[t]
-        mpc.cfg = replace(cfg.mpc, samples=max(2, round(cfg.mpc.samples * cfg.retry_samples**attempts)))
+        mpc.cfg = replace(
+            cfg.mpc, samples=max(2, round(cfg.mpc.samples * cfg.retry_samples**attempts))
+        )
         mpc.rng = np.random.default_rng([cfg.mpc.seed, attempts, t_back])
         attempts += 1
 

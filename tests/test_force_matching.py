@@ -256,8 +256,8 @@ def test_cli_run_forces_reports_force_preservation(human_with_forces, tmp_path):
 def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
     """Allegro on the built-in cuboid3/adducted_thumb, retargeted with the fixed-depth grip,
     each frame started from the last solution and isotropic contact targets (``grip="depth"``,
-    ``warm_start_extrapolate=False``, ``contact_tangent_weight=1``: the defaults hold this one
-    open loop): replayed open loop
+    ``warm_start_extrapolate=False``, ``contact_tangent_weight=1``, and the earlier wrist and
+    posture weights 0.3 and 1e-3: the defaults hold this one open loop): replayed open loop
     (default soft contacts) the cuboid slips out (at frame 617); the sampling MPC on the robot
     hand keeps it (DexCanvas rule, no frame over 5 cm), moving the commands by millimetres."""
     from dexcanvas_core.demos.geometry import object_geometry
@@ -271,7 +271,14 @@ def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
     rt = Retargeter(
         hand,
         geo,
-        RetargetConfig(grip="depth", warm_start_extrapolate=False, contact_tangent_weight=1.0),
+        RetargetConfig(
+            grip="depth",
+            warm_start_extrapolate=False,
+            contact_tangent_weight=1.0,
+            w_wrist_pos=0.3,
+            w_wrist_rot=0.3,
+            w_posture=1e-3,
+        ),
     )
     robot = rt.retarget(demo)
     # the default re-simulation's contacts (the stiff ones of force matching alone keep it)
