@@ -62,19 +62,23 @@ def build_qp(
     Gs, hs, As, bs = [np.zeros((0, nv))], [np.zeros(0)], [np.zeros((0, nv))], [np.zeros(0)]
     lb = ub = None
     for lim in limits:
-        box = lim.bounds(state)
-        if box is not None:
-            lo, hi = box
-            lb = lo if lb is None else np.maximum(lb, lo)
-            ub = hi if ub is None else np.minimum(ub, hi)
-        G, h = lim.inequalities(state)
-        if G.shape[0]:
-            Gs.append(G)
-            hs.append(h)
-        A, b = lim.equalities(state)
-        if A.shape[0]:
-            As.append(A)
-            bs.append(b)
+        kind = type(lim)
+        if kind.bounds is not Limit.bounds:  # (the base's methods add nothing: skipped)
+            box = lim.bounds(state)
+            if box is not None:
+                lo, hi = box
+                lb = lo if lb is None else np.maximum(lb, lo)
+                ub = hi if ub is None else np.minimum(ub, hi)
+        if kind.inequalities is not Limit.inequalities:
+            G, h = lim.inequalities(state)
+            if G.shape[0]:
+                Gs.append(G)
+                hs.append(h)
+        if kind.equalities is not Limit.equalities:
+            A, b = lim.equalities(state)
+            if A.shape[0]:
+                As.append(A)
+                bs.append(b)
     return QPProblem(
         P=0.5 * (P + P.T),
         q=c,

@@ -59,9 +59,10 @@ _FIELDS = [f.name for f in fields(PairDistances)]
 def _normals(distance: np.ndarray, p_a: np.ndarray, p_b: np.ndarray) -> np.ndarray:
     """Unit normals ``a → b`` from nearest points: ``(p_b − p_a) / d`` normalised (NaN if d = 0)."""
     v = (p_b - p_a) * np.where(distance >= 0, 1.0, -1.0)[:, None]
-    norm = np.linalg.norm(v, axis=1, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(norm > 1e-9, v / norm, np.nan)
+    norm = np.sqrt((v * v).sum(axis=1, keepdims=True))
+    out = np.full_like(v, np.nan)
+    np.divide(v, norm, out=out, where=norm > 1e-9)  # (no errstate: it costs more than this)
+    return out
 
 
 # Pairs with one of these geoms get identical answers from mj_collision and mj_geomDistance.
@@ -363,7 +364,7 @@ class CollisionLimit(Limit):
         """
         xpos = self.data.geom_xpos
         diff = xpos[self._sph_a] - xpos[self._sph_b]  # (P, 3)
-        out = self._sph[np.einsum("ij,ij->i", diff, diff) < self._sph_reach2]
+        out = self._sph[(diff * diff).sum(axis=1) < self._sph_reach2]
         if self._pln.size:
             # Height of the hand geom's centre above the plane (normal: the plane frame's z).
             n = self.data.geom_xmat[self._pln_b][:, [2, 5, 8]]
@@ -524,7 +525,9 @@ class CollisionLimit(Limit):
 
     def inequalities(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         r = self.row_points(state.q)
-        self._near = np.array(sorted(set(r.index[r.distance < self.NEAR].tolist())), dtype=int)
+        # Each pair's closest points are query()'s row, so its near pairs are unique there.
+        closest = r if self.sweep is None else self.query(state.q)  # (cached with the sweep)
+        self._near = closest.index[closest.distance < self.NEAR]
         if not r.distance.size:
             return np.zeros((0, state.nv)), np.zeros(0)
         n = r.normal
