@@ -45,6 +45,21 @@ class QPSolveError(RetargetError):
         self.problem = problem
 
 
+_EYE: dict[tuple[int, float], np.ndarray] = {}
+
+
+def _damping_matrix(nv: int, damping: float) -> np.ndarray:
+    """A fresh ``damping · I`` (nv, nv), copied from a memoised one (``np.eye`` and the
+    product cost 3× more)."""
+    key = (nv, damping)
+    D = _EYE.get(key)
+    if D is None:
+        if len(_EYE) > 32:
+            _EYE.clear()
+        D = _EYE[key] = damping * np.eye(nv)
+    return D.copy()
+
+
 def build_qp(
     state: RobotState,
     objectives: Sequence[Objective],
@@ -53,7 +68,7 @@ def build_qp(
 ) -> QPProblem:
     """Assemble the QP at ``state`` (objectives' Gauss–Newton terms, limits' linear rows)."""
     nv = state.nv
-    P = damping * np.eye(nv)
+    P = _damping_matrix(nv, damping)
     c = np.zeros(nv)
     for obj in objectives:
         H, g = obj.qp_terms(state)

@@ -1047,7 +1047,7 @@ class Retargeter:
         if gap.any():
             delta = -(gap[:, None] * normals[idx]).reshape(-1)
             dq = dq + _damped_step(Jall.reshape(-1, self.nq), delta)
-        return np.clip(q + dq, self.lower, self.upper) - q
+        return np.minimum(np.maximum(q + dq, self.lower), self.upper) - q
 
     def _squeeze(self, q: np.ndarray, active: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """``grip="depth"``: joint offset pressing each contacting finger ``squeeze_depth``
@@ -1068,7 +1068,7 @@ class Retargeter:
         J[:, :6] = 0.0
         delta = np.concatenate([-self.cfg.squeeze_depth * normals[i] for i in idx])
         dq = _damped_step(J, delta)
-        return np.clip(q + dq, self.lower, self.upper) - q
+        return np.minimum(np.maximum(q + dq, self.lower), self.upper) - q
 
     def _objectives(self):
         objs = [self.wrist, self.keypoints, self.posture, self.smooth]
@@ -1163,7 +1163,7 @@ class Retargeter:
         q0[:6] += dw
         if (active[t] == active[t - 1]).all() and (active[t - 1] == active[t - 2]).all():
             q0[6:] += q[6:] - Q_last[0, 6:]
-        q0 = np.clip(q0, self.lower, self.upper)
+        q0 = np.minimum(np.maximum(q0, self.lower), self.upper)  # (np.clip: 3× slower)
         return q if self._too_deep(q0) else q0
 
     def _too_deep(self, q: np.ndarray) -> bool:

@@ -99,6 +99,38 @@ def test_qp_terms_are_gauss_newton_of_the_cost(kin):
     assert np.all(np.linalg.eigvalsh(H) > -1e-12)
 
 
+def test_memoised_qp_terms_follow_weight_and_mask_changes(kin):
+    """Posture and smoothness memoise their diagonal Hessian; it must track new weights and
+    masks, and match the generic ``JᵀWJ, JᵀWe`` of their error and Jacobian."""
+    from retarget.objectives.base import Objective
+
+    rng = np.random.default_rng(3)
+    post = PostureObjective(rng.normal(size=kin.nq), weight=1e-3)
+    sm = SmoothnessObjective(weight=0.05)
+    sm.set_previous(rng.normal(size=kin.nq))
+    mask_b = rng.random(kin.nq) < 0.5
+    mask_b[0] = True
+    for step in range(4):
+        if step == 1:
+            post.weight = rng.uniform(0.1, 2.0, size=kin.nq)
+            sm.weight = 3.0
+        if step == 2:
+            post.mask = mask_b
+            post.weight = 0.7
+        if step == 3:
+            post.mask = ~mask_b
+        q = rng.uniform(-0.5, 0.5, size=kin.nq)
+        s = _state(kin, q)
+        for obj in (post, sm):
+            H, c = obj.qp_terms(s)
+            H_ref, c_ref = Objective.qp_terms(obj, s)
+            np.testing.assert_allclose(H, H_ref, atol=1e-15, err_msg=f"{obj.name} step {step}")
+            np.testing.assert_allclose(c, c_ref, atol=1e-15, err_msg=f"{obj.name} step {step}")
+            # Shared memo: a caller accumulating into the returned arrays must fail loudly.
+            with pytest.raises(ValueError):
+                H += 1.0
+
+
 def test_keypoint_round_trip_recovers_sites(kin):
     """Random robot pose → its sites → solve from another pose → same sites within 1 mm."""
     rng = np.random.default_rng(2)

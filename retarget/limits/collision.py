@@ -483,7 +483,11 @@ class CollisionLimit(Limit):
         the other end goes in (built-in demonstrations, Allegro and LEAP: up to 7.0 mm deep
         with closest-point rows).
         """
-        r = self.query(q)
+        return self._with_further(self.query(q))
+
+    def _with_further(self, r: PairDistances) -> PairDistances:
+        """:meth:`query`'s answer ``r`` at the sweep's configuration followed by the further
+        contacts (:meth:`row_points`)."""
         if self.sweep is not None:
             extra = self._further_contacts()
             if extra.index.size:
@@ -524,9 +528,9 @@ class CollisionLimit(Limit):
         )
 
     def inequalities(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
-        r = self.row_points(state.q)
+        closest = self.query(state.q)
+        r = self._with_further(closest)  # (row_points)
         # Each pair's closest points are query()'s row, so its near pairs are unique there.
-        closest = r if self.sweep is None else self.query(state.q)  # (cached with the sweep)
         self._near = closest.index[closest.distance < self.NEAR]
         if not r.distance.size:
             return np.zeros((0, state.nv)), np.zeros(0)

@@ -153,7 +153,7 @@ class SurfaceContactObjective(Objective):
         ``normals``."""
         self._split = False  # this frame's errors are in the targets' surface frames
         self._frames = np.zeros((F, 3, 3))  # per finger rows n, t1, t2 (when split)
-        self._cache_q: np.ndarray | None = None
+        self._cache_q: bytes | None = None  # q of the cached finger points
         self._cache: list[tuple[str, np.ndarray]] = []
         self._bodies = [
             mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(model.nbody)
@@ -202,7 +202,8 @@ class SurfaceContactObjective(Objective):
 
     def finger_points(self, q: np.ndarray) -> list[tuple[str, np.ndarray]]:
         """Per finger: (body name, surface point [m] of its contact link nearest the object)."""
-        if self._cache_q is not None and np.array_equal(q, self._cache_q):
+        key = np.asarray(q, dtype=np.float64).tobytes()  # (cheaper than array_equal)
+        if self._cache_q is not None and key == self._cache_q:
             return self._cache
         mj = self._mj
         self.data.qpos[: self.hand_nq] = q
@@ -219,7 +220,7 @@ class SurfaceContactObjective(Objective):
                         best_b = self._bodies[self.model.geom_bodyid[g]]
             out.append((best_b, best_p))
             dists.append(best)
-        self._cache_q, self._cache, self._cache_d = q.copy(), out, np.array(dists)
+        self._cache_q, self._cache, self._cache_d = key, out, np.array(dists)
         self._cache_p = np.array([p for _, p in out])  # (F, 3)
         return out
 

@@ -26,9 +26,8 @@ class PostureObjective(Objective):
 
     def qp_terms(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         # J = S (a row selection): JᵀWJ is diagonal and JᵀWe scatters W e; no matrix products.
-        w = np.zeros(state.nv)
-        w[self.mask] = self._weight_vector(int(self.mask.sum()))
-        return np.diag(w), w * (state.q - self.q_ref)
+        H, w = _diagonal(self, self._weight_vector(int(self.mask.sum())), self.mask)
+        return H, w * (state.q - self.q_ref)
 
 
 class SmoothnessObjective(Objective):
@@ -56,5 +55,22 @@ class SmoothnessObjective(Objective):
     def qp_terms(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         if self.q_prev is None:
             return np.zeros((state.nv, state.nv)), np.zeros(state.nv)
-        w = self._weight_vector(state.nv)  # J = I
-        return np.diag(w), w * (state.q - self.q_prev)
+        H, w = _diagonal(self, self._weight_vector(state.nv), None)  # J = I
+        return H, w * (state.q - self.q_prev)
+
+
+def _diagonal(obj: Objective, weights: np.ndarray, mask: np.ndarray | None):
+    """``(JᵀWJ, diag)`` of a row-selection Jacobian ``J = S`` (``mask``; ``None``: all
+    rows): the diagonal matrix is built once per weight vector (``_weight_vector``'s memo
+    returns the same array while the weights stay) and shared, read-only."""
+    key = None if mask is None else mask.tobytes()
+    memo = obj.__dict__.get("_diag_memo")
+    if memo is None or memo[0] is not weights or memo[3] != key:
+        w = weights.copy() if mask is None else np.zeros(mask.shape[0])
+        if mask is not None:
+            w[mask] = weights
+        H = np.diag(w)
+        H.flags.writeable = False
+        w.flags.writeable = False
+        memo = obj.__dict__["_diag_memo"] = (weights, H, w, key)
+    return memo[1], memo[2]
