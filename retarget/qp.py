@@ -156,7 +156,7 @@ def solve_qp(problem: QPProblem, solver: str = "daqp") -> np.ndarray:
         x = qpsolvers.solve_qp(
             problem.P, problem.q, G, h, A, b, lb=problem.lb, ub=problem.ub, solver=solver
         )
-    if x is None or not np.all(np.isfinite(x)):
+    if x is None or not np.isfinite(x).all():
         # Infeasible limits (e.g. a coupling that contradicts a bound): report, don't hide.
         raise QPSolveError(
             f"QP solver {solver!r} found no solution ({problem.G.shape[0]} inequality and "

@@ -364,7 +364,7 @@ class CollisionLimit(Limit):
         """
         xpos = self.data.geom_xpos
         diff = xpos[self._sph_a] - xpos[self._sph_b]  # (P, 3)
-        out = self._sph[(diff * diff).sum(axis=1) < self._sph_reach2]
+        out = self._sph[np.add.reduce(diff * diff, axis=1) < self._sph_reach2]  # (= .sum(axis=1))
         if self._pln.size:
             # Height of the hand geom's centre above the plane (normal: the plane frame's z).
             n = self.data.geom_xmat[self._pln_b][:, [2, 5, 8]]

@@ -47,8 +47,9 @@ class VelocityLimit(Limit):
         self.v_max = v_max
 
     def bounds(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
-        if np.ndim(self.v_max) == 0:
-            v = np.full(state.nv, float(self.v_max) * state.dt)
+        v_max = self.v_max
+        if isinstance(v_max, (int, float)) or np.ndim(v_max) == 0:
+            v = np.full(state.nv, float(v_max) * state.dt)
         else:
             v = np.broadcast_to(np.asarray(self.v_max, dtype=np.float64), (state.nv,)) * state.dt
         return -v, v

@@ -26,7 +26,7 @@ class PostureObjective(Objective):
 
     def qp_terms(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         # J = S (a row selection): JᵀWJ is diagonal and JᵀWe scatters W e; no matrix products.
-        H, w = _diagonal(self, self._weight_vector(int(self.mask.sum())), self.mask)
+        H, w = _diagonal(self, self._weight_vector(np.count_nonzero(self.mask)), self.mask)
         return H, w * (state.q - self.q_ref)
 
 
