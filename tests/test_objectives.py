@@ -274,6 +274,33 @@ def test_limited_tendon_rows_hold_after_solving():
     assert abs(0.00705 * free[1] - 0.00805 * free[0]) > 0.002  # without the rows it breaks it
 
 
+def test_one_joint_tendon_range_is_a_box_bound():
+    """A limited tendon on one joint (Shadow's actuator tendons) is that joint's interval: box
+    bounds instead of rows, which the step respects and which pull a violation back."""
+    xml = TENDON_COUPLED.replace(
+        "</tendon>",
+        '  <fixed name="one" limited="true" range="-0.002 0.004"><joint joint="j1" coef="-0.01"/>'
+        "</fixed>\n  </tendon>",
+    )
+    m = mujoco.MjModel.from_xml_string(xml)
+    kin = PinocchioKinematics(m)
+    coupling = CouplingLimit.from_mjmodel(m)
+    assert len(coupling.ranges) == 2
+    s = _state(kin, np.array([0.1, 0.0]))
+    G, _ = coupling.inequalities(s)
+    assert G.shape == (2, 2)  # the two-joint coupling only
+    lo, hi = coupling.bounds(s)  # -0.002 ≤ -0.01·j1 ≤ 0.004  ⇔  -0.4 ≤ j1 ≤ 0.2
+    np.testing.assert_allclose([lo[0], hi[0]], [-0.4 - 0.1, 0.2 - 0.1])
+    assert lo[1] == -np.inf and hi[1] == np.inf
+    kp = KeypointObjective(["tip"])
+    kp.set_targets(np.array([[0.0, 0.15, 0.0]]))  # straight up: j1 = π/2, beyond the range
+    for q in (np.zeros(2), np.array([0.5, 0.57])):  # inside, and outside it
+        for _ in range(30):
+            q = q + solve_qp(build_qp(_state(kin, q), [kp], [coupling], damping=1e-4))
+        assert -0.4 - 1e-9 <= q[0] <= 0.2 + 1e-9
+        assert q[0] == pytest.approx(0.2, abs=1e-6)  # pressed against the bound
+
+
 OBJECT_SCENE = """
 <mujoco>
   <compiler angle="radian"/>
