@@ -58,10 +58,11 @@ _FIELDS = [f.name for f in fields(PairDistances)]
 
 def _normals(distance: np.ndarray, p_a: np.ndarray, p_b: np.ndarray) -> np.ndarray:
     """Unit normals ``a → b`` from nearest points: ``(p_b − p_a) / d`` normalised (NaN if d = 0)."""
-    v = (p_b - p_a) * np.where(distance >= 0, 1.0, -1.0)[:, None]
-    norm = np.sqrt((v * v).sum(axis=1, keepdims=True))
+    v = p_b - p_a
+    norm = np.sqrt(np.add.reduce(v * v, axis=1))
+    signed = np.where(distance >= 0, norm, -norm)[:, None]  # (± is exact: v / ±|v|)
     out = np.full_like(v, np.nan)
-    np.divide(v, norm, out=out, where=norm > 1e-9)  # (no errstate: it costs more than this)
+    np.divide(v, signed, out=out, where=(norm > 1e-9)[:, None])  # (no errstate: costs more)
     return out
 
 
