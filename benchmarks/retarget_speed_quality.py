@@ -239,7 +239,11 @@ def target_checks(overall: dict) -> list[dict]:
 
     checks = [
         {"target": f"ms/frame ≤ {TARGET_MS} (contact + penetration terms on)",
-         "value": ours["ms_per_frame"], "met": ours["ms_per_frame"] <= TARGET_MS},
+         "value": ours["ms_per_frame"], "met": ours["ms_per_frame"] <= TARGET_MS,
+         # The absolute target depends on the machine (dex-retargeting took 0.84–1.96 ms per
+         # frame where it was set): the same run's ratio is reported beside it.
+         "dex_ms_per_frame": dex["ms_per_frame"],
+         "ratio": ratio(ours["ms_per_frame"], dex["ms_per_frame"] or 0)},
         {"target": "keypoint error ≤ dex-retargeting's",
          "value": [ours["keypoint_err_mean_m"], dex["keypoint_err_mean_m"]],
          "met": ours["keypoint_err_mean_m"] <= dex["keypoint_err_mean_m"]},
@@ -311,6 +315,8 @@ def targets_table(checks: list[dict]):
         v = c["value"]
         if "ms/frame" in c["target"]:
             s = f"{v:.3f} ms"
+            if c.get("ratio") is not None:
+                s += f" ({c['ratio']:.2f}× dex-retargeting's {c['dex_ms_per_frame']:.3f})"
         elif "keypoint" in c["target"]:
             s = f"{1e3 * v[0]:.2f} vs {1e3 * v[1]:.2f} mm"
         elif "penetration" in c["target"]:

@@ -42,3 +42,27 @@ def test_contact_error_table_renders_every_bin():
     console.print(contact_error_table("shadow", by_contact_error(rows)))
     text = console.export_text()
     assert "0–2 mm" in text and "> 10 mm" in text and "100 (1)" in text
+
+
+def test_speed_target_reports_the_ratio_to_dex_retargeting():
+    """``retarget_speed_quality``: the ms/frame target is absolute (met or not by the machine),
+    so the same run's ratio to dex-retargeting's time is reported beside it."""
+    from retarget_speed_quality import DEX, OURS, target_checks, targets_table
+    from rich.console import Console
+
+    agg = {
+        "ms_per_frame": 0.6,
+        "keypoint_err_mean_m": 0.016,
+        "penetration_max_m": 0.001,
+        "success_rate": 0.5,
+        "success_loose_rate": 0.8,
+    }
+    overall = {OURS: agg, DEX: {**agg, "ms_per_frame": 2.0, "success_rate": 0.2}}
+    checks = target_checks(overall)
+    speed = next(c for c in checks if "ms/frame" in c["target"])
+    assert not speed["met"] and speed["ratio"] == 0.3 and speed["dex_ms_per_frame"] == 2.0
+    strict = next(c for c in checks if "strict" in c["target"])
+    assert strict["met"] and strict["ratio"] == 2.5
+    console = Console(width=150, record=True)
+    console.print(targets_table(checks))
+    assert "0.600 ms (0.30× dex-retargeting's 2.000)" in console.export_text()
