@@ -49,8 +49,8 @@ _EYE: dict[tuple[int, float], np.ndarray] = {}
 
 
 def _damping_matrix(nv: int, damping: float) -> np.ndarray:
-    """A fresh ``damping · I`` (nv, nv), copied from a memoised one (``np.eye`` and the
-    product cost 3× more)."""
+    """A fresh ``damping · I`` (nv, nv), copied from a memoised one (``damping * np.eye``
+    costs 5× as much on 30 dofs: 3.3 against 0.7 µs)."""
     key = (nv, damping)
     D = _EYE.get(key)
     if D is None:

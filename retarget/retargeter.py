@@ -1047,7 +1047,7 @@ class Retargeter:
         if gap.any():
             delta = -(gap[:, None] * normals[idx]).reshape(-1)
             dq = dq + _damped_step(Jall.reshape(-1, self.nq), delta)
-        return np.minimum(np.maximum(q + dq, self.lower), self.upper) - q
+        return self._within_limits(q + dq) - q
 
     def _squeeze(self, q: np.ndarray, active: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """``grip="depth"``: joint offset pressing each contacting finger ``squeeze_depth``
@@ -1068,7 +1068,7 @@ class Retargeter:
         J[:, :6] = 0.0
         delta = np.concatenate([-self.cfg.squeeze_depth * normals[i] for i in idx])
         dq = _damped_step(J, delta)
-        return np.minimum(np.maximum(q + dq, self.lower), self.upper) - q
+        return self._within_limits(q + dq) - q
 
     def _objectives(self):
         objs = [self.wrist, self.keypoints, self.posture, self.smooth]
@@ -1163,8 +1163,13 @@ class Retargeter:
         q0[:6] += dw
         if (active[t] == active[t - 1]).all() and (active[t - 1] == active[t - 2]).all():
             q0[6:] += q[6:] - Q_last[0, 6:]
-        q0 = np.minimum(np.maximum(q0, self.lower), self.upper)  # (np.clip: 3× slower)
+        q0 = self._within_limits(q0)
         return q if self._too_deep(q0) else q0
+
+    def _within_limits(self, q: np.ndarray) -> np.ndarray:
+        """``q`` clipped to the joint ranges (``np.clip`` costs 2.3× as much on 30 dofs: 3.2
+        against 1.4 µs)."""
+        return np.minimum(np.maximum(q, self.lower), self.upper)
 
     def _too_deep(self, q: np.ndarray) -> bool:
         """Whether ``q`` is deeper than a collision limit's margin + 0.5 mm anywhere (one

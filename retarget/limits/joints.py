@@ -51,7 +51,7 @@ class VelocityLimit(Limit):
         if isinstance(v_max, (int, float)) or np.ndim(v_max) == 0:
             v = np.full(state.nv, float(v_max) * state.dt)
         else:
-            v = np.broadcast_to(np.asarray(self.v_max, dtype=np.float64), (state.nv,)) * state.dt
+            v = np.broadcast_to(np.asarray(v_max, dtype=np.float64), (state.nv,)) * state.dt
         return -v, v
 
 
