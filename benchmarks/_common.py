@@ -21,10 +21,11 @@ from __future__ import annotations
 import json
 import logging
 import os
-from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+
+from dexcanvas_core.demos.feasibility import spread_pairs as select_pairs  # the suite's order
 
 GENERATION_ATTEMPTS = 3
 """Seeds tried per pair (``seed + i + 1000·attempt``) before a pair is given up."""
@@ -149,38 +150,6 @@ def config_overrides(pairs, config_cls) -> dict:
 
 
 # ------------------------------------------------------------------ the group-spread suite
-def select_pairs(pairs) -> list:
-    """The order in which pairs are taken, spreading them over the four groups deterministically.
-
-    Within a group: round robin over its manipulation types (catalogue order); each type walks
-    its objects starting at an offset that differs per type, so types do not all pick the same
-    object. Groups are then interleaved (power, intermediate, precision, in-hand, power, …).
-    Returns every pair in that order; callers take the first ``n`` that work, per group quota.
-    """
-    from dexcanvas_core.taxonomy import GROUPS
-
-    by_group: dict[str, dict[str, list]] = {g: defaultdict(list) for g in GROUPS}
-    for p in pairs:
-        by_group[p.manipulation_type.group][p.manipulation_type.name].append(p)
-    group_orders = {}
-    for g, types in by_group.items():
-        order = []
-        lists = list(types.values())
-        depth = max((len(x) for x in lists), default=0)
-        for r in range(depth):
-            for k, objs in enumerate(lists):
-                if r < len(objs):
-                    order.append(objs[(r + 3 * k) % len(objs)])
-        group_orders[g] = order
-    out = []
-    depth = max((len(o) for o in group_orders.values()), default=0)
-    for r in range(depth):
-        for g in GROUPS:
-            if r < len(group_orders[g]):
-                out.append(group_orders[g][r])
-    return out
-
-
 def crop_demo(traj, max_frames: int | None):
     """At most ``max_frames`` frames, starting a third of the window before the object moves."""
     if max_frames is None or traj.num_frames <= max_frames:

@@ -41,6 +41,7 @@ from dexcanvas_core.demos.feasibility import (
     feasibility,
     feasibility_table,
     feasible_pairs,
+    spread_pairs,
 )
 from dexcanvas_core.demos.geometry import ObjectGeometry, Primitive, object_geometry
 from dexcanvas_core.demos.grasp import GRASP_SPECS, Grasp, GraspSpec, solve_grasp
@@ -82,4 +83,5 @@ __all__ = [
     "report_path",
     "run_build",
     "solve_grasp",
+    "spread_pairs",
 ]

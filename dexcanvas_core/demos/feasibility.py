@@ -26,6 +26,7 @@ Every manipulation type has at least one feasible object (checked when the table
 
 from __future__ import annotations
 
+from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
@@ -285,3 +286,35 @@ def feasibility(pair: str | Pair) -> Feasibility:
     """The table entry of one pair (``"cube2/tripod"`` or a :class:`Pair`)."""
     p = pair if isinstance(pair, Pair) else Pair.parse(pair)
     return feasibility_table()[(p.object.id, p.manipulation_type.name)]
+
+
+def spread_pairs(pairs) -> list:
+    """The order in which pairs are taken, spreading them over the four groups deterministically.
+
+    Within a group: round robin over its manipulation types (catalogue order); each type walks
+    its objects starting at an offset that differs per type, so types do not all pick the same
+    object. Groups are then interleaved (power, intermediate, precision, in-hand, power, …).
+    Returns every pair in that order; callers take the first ``n`` that work, per group quota.
+    """
+    from dexcanvas_core.taxonomy import GROUPS
+
+    by_group: dict[str, dict[str, list]] = {g: defaultdict(list) for g in GROUPS}
+    for p in pairs:
+        by_group[p.manipulation_type.group][p.manipulation_type.name].append(p)
+    group_orders = {}
+    for g, types in by_group.items():
+        order = []
+        lists = list(types.values())
+        depth = max((len(x) for x in lists), default=0)
+        for r in range(depth):
+            for k, objs in enumerate(lists):
+                if r < len(objs):
+                    order.append(objs[(r + 3 * k) % len(objs)])
+        group_orders[g] = order
+    out = []
+    depth = max((len(o) for o in group_orders.values()), default=0)
+    for r in range(depth):
+        for g in GROUPS:
+            if r < len(group_orders[g]):
+                out.append(group_orders[g][r])
+    return out
