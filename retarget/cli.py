@@ -107,6 +107,13 @@ def _non_negative_int(text: str) -> int:
     return n
 
 
+def _positive_int(text: str) -> int:
+    n = _non_negative_int(text)
+    if n == 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return n
+
+
 def _add_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hand", required=True, help="robot hand (see `retarget hands`)")
     p.add_argument("--pair", required=True, help="OBJECT/TYPE, e.g. cube2/tripod")
@@ -379,6 +386,33 @@ def _keypoints(cfg: KeypointsConfig) -> dict:
     return run_keypoints(cfg)
 
 
+# ------------------------------------------------------------------ retarget calibrate-wrist
+def _add_calibrate_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--hand", required=True, help="robot hand (see `retarget hands`)")
+    p.add_argument("--pairs", type=_positive_int, default=8, help="generated demonstration pairs")
+    p.add_argument("--operator", default="operator2", help="operator of the demonstrations")
+    p.add_argument("--seed", type=_non_negative_int, default=1, help="demonstration seed")
+    p.add_argument(
+        "--max-frames", type=_non_negative_int, default=300,
+        help="crop each demonstration to this many frames (0: whole)",
+    )  # fmt: skip
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+
+
+def _calibrate_config(args: argparse.Namespace):
+    from retarget.calibration import CalibrateConfig
+
+    return CalibrateConfig(
+        args.hand, args.pairs, args.operator, args.seed, args.max_frames or None, args.json
+    )
+
+
+def _calibrate(cfg) -> object:
+    from retarget.calibration import run_calibrate
+
+    return run_calibrate(cfg)
+
+
 # ---------------------------------------------------------------------------- command table
 
 
@@ -411,6 +445,12 @@ COMMANDS: dict[str, Command] = {
         add_arguments=_add_keypoints_args,
         make_config=_keypoints_config,
         run=_keypoints,
+    ),
+    "calibrate-wrist": Command(
+        help="measure a hand's wrist offset from the human wrist (for HandModel.wrist_offset)",
+        add_arguments=_add_calibrate_args,
+        make_config=_calibrate_config,
+        run=_calibrate,
     ),
     "snapshot": Command(
         help="stills of chosen frames (headless Chromium or MuJoCo) and the scene as HTML",

@@ -146,6 +146,11 @@ class RetargetConfig:
     w_smooth: float = 0.05
     damping: float = 1e-5
     """Levenberg–Marquardt damping of the step."""
+    use_wrist_offset: bool = True
+    """Aim the wrist at the human wrist pose composed with the hand's calibrated
+    ``HandModel.wrist_offset`` (``retarget calibrate-wrist``), where its fingers match the
+    human's, instead of at the human wrist pose itself. See the benchmark in
+    ``retarget.calibration``."""
     use_contacts: bool = True
     use_collision: bool = True
     penetration_margin: float = 0.001
@@ -618,6 +623,8 @@ class Retargeter:
         R_wrist = aa_to_matrix(h.global_rot_aa.astype(np.float64))
         scaled = self._scaled_keypoints(traj, h_kp)  # (T, 21, 3)
         wrist_p = scaled[:, 0]
+        if self.cfg.use_wrist_offset and self.hand.wrist_offset is not None:
+            R_wrist, wrist_p = self.hand.wrist_offset.apply(R_wrist, wrist_p)
         kp = scaled[:, self.kp_index]
         vec = (
             np.stack([scaled[:, a] - scaled[:, b] for a, b in self.vec_human], axis=1)

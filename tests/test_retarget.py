@@ -6,18 +6,16 @@ import json
 
 import numpy as np
 import pytest
-from robot_poses import coupled
+from robot_poses import coupled, human_from_robot_poses
 
 from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.example import example_trajectories
 from dexcanvas_core.io import write_dataset
-from dexcanvas_core.keypoints import MANO21
-from dexcanvas_core.rotations import aa_to_matrix, matrix_to_aa
-from dexcanvas_core.trajectory import HandTrack, Trajectory
+from dexcanvas_core.rotations import aa_to_matrix
+from dexcanvas_core.trajectory import Trajectory
 from retarget.cli import main
 from retarget.errors import RetargetError
 from retarget.hands import get_hand
-from retarget.hands.base import WRIST_SITE
 from retarget.kinematics import MujocoKinematics, PinocchioKinematics
 from retarget.retargeter import RetargetConfig, Retargeter
 from retarget.state import RobotState
@@ -31,25 +29,8 @@ def demo() -> Trajectory:
 
 
 def _robot_keypoint_human(rt: Retargeter, q: np.ndarray) -> Trajectory:
-    """A one-frame 'human' whose scaled keypoints are the robot's own sites at ``q``."""
-    kin = rt.kin
-    kin.forward(q)
-    R = kin.site_rotation(WRIST_SITE)
-    p_w = kin.site_position(WRIST_SITE)
-    kp = np.tile(p_w, (21, 1))
-    for name, site in zip(rt.kp_names, rt.kp_sites, strict=True):
-        kp[MANO21.index(name)] = p_w + (kin.site_position(site) - p_w) / rt.scale
-    T = 2
-    hand = HandTrack(
-        name="right",
-        global_pos=np.tile(p_w, (T, 1)),
-        global_rot_aa=np.tile(matrix_to_aa(R), (T, 1)),
-        hand_pose=np.zeros((T, 48)),
-        joint_pos=np.tile(kp, (T, 1, 1)),
-    )
-    return Trajectory(
-        uuid="robot-pose", timestamp=np.arange(T) / 120.0, fps=120.0, hands=[hand], objects=[]
-    )
+    """A two-frame 'human' whose retargeting targets are the robot's own pose ``q``."""
+    return human_from_robot_poses(rt, np.tile(q, (2, 1)), uuid="robot-pose")
 
 
 @pytest.mark.parametrize("hand_name", ["allegro", "shadow"])
@@ -570,7 +551,10 @@ def test_surface_scaling_keeps_touching_keypoints_touching():
     # Uniform scaling pushed the touching keypoints (s − 1)·r off: farther than this.
     assert (d_u[touch] - d_out[touch]).mean() > 0.005
     tg = rt.human_targets(demo)  # the wrist, keypoint and vector targets are these points
-    np.testing.assert_allclose(tg["wrist_p"], out[:, 0])
+    R_h = aa_to_matrix(demo.hand.global_rot_aa.astype(np.float64))
+    off = rt.hand.wrist_offset  # the wrist target: the scaled wrist moved by the hand's offset
+    np.testing.assert_allclose(tg["wrist_p"], out[:, 0] + R_h @ np.asarray(off.translation))
+    np.testing.assert_allclose(tg["wrist_R"], R_h @ off.R, atol=1e-12)
     np.testing.assert_allclose(tg["keypoints"], out[:, rt.kp_index])
     a, b = rt.vec_human[0]
     np.testing.assert_allclose(tg["vectors"][:, 0], out[:, a] - out[:, b])

@@ -6,14 +6,12 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
-from robot_poses import coupled
+from robot_poses import coupled, human_from_robot_poses
 
 from dexcanvas_core.demos.geometry import object_geometry
-from dexcanvas_core.keypoints import MANO21
-from dexcanvas_core.rotations import matrix_to_aa
-from dexcanvas_core.trajectory import HandTrack, Trajectory
+from dexcanvas_core.trajectory import Trajectory
 from retarget.hands import available_hands, get_hand
-from retarget.hands.base import WRIST_SITE, wrist_qpos_from_mano
+from retarget.hands.base import wrist_qpos_from_mano
 from retarget.kinematics import MujocoKinematics, PinocchioKinematics
 from retarget.limits import CollisionLimit
 from retarget.retargeter import RetargetConfig, Retargeter
@@ -196,22 +194,7 @@ def demo_cube() -> Trajectory:
 # ----------------------------------------------------------- fingers commanded into each other
 def _human_from_robot_poses(rt: Retargeter, Q: np.ndarray) -> Trajectory:
     """A 'human' whose scaled keypoints are the robot's own sites along ``Q`` (T, nq)."""
-    T = Q.shape[0]
-    kp = np.zeros((T, 21, 3))
-    pos, rot = np.zeros((T, 3)), np.zeros((T, 3))
-    for t, q in enumerate(Q):
-        rt.kin.forward(q)
-        p_w = rt.kin.site_position(WRIST_SITE)
-        kp[t] = p_w
-        for name, site in zip(rt.kp_names, rt.kp_sites, strict=True):
-            kp[t, MANO21.index(name)] = p_w + (rt.kin.site_position(site) - p_w) / rt.scale
-        pos[t], rot[t] = p_w, matrix_to_aa(rt.kin.site_rotation(WRIST_SITE))
-    hand = HandTrack(
-        name="right", global_pos=pos, global_rot_aa=rot, hand_pose=np.zeros((T, 48)), joint_pos=kp
-    )
-    return Trajectory(
-        uuid="fingers-crossed", timestamp=np.arange(T) / 120.0, fps=120.0, hands=[hand], objects=[]
-    )
+    return human_from_robot_poses(rt, Q, uuid="fingers-crossed")
 
 
 @pytest.mark.parametrize("name", HANDS)

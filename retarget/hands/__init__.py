@@ -25,6 +25,7 @@ from retarget.hands.base import (
     SitePlacement,
     WristAlignment,
     WristGains,
+    WristOffset,
     wrist_qpos_from_mano,
 )
 from retarget.hands.registry import (
@@ -48,6 +49,7 @@ __all__ = [
     "SitePlacement",
     "WristAlignment",
     "WristGains",
+    "WristOffset",
     "available_hands",
     "get_hand",
     "hands_table",

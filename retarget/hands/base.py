@@ -209,6 +209,54 @@ class WristAlignment:
         return T
 
 
+@dataclass(frozen=True)
+class WristOffset:
+    """Where the robot's wrist should be, relative to the scaled human wrist, for its fingers to
+    land on the human's: the robot wrist site's pose in MANO's wrist frame.
+
+    :class:`WristAlignment` puts MANO's wrist frame on the robot by the robot's own kinematics
+    (finger direction, thumb side, mount point), which fixes the frames but not the pose a grasp
+    needs: a hand whose fingers curl differently from a human's (one motor per finger on Inspire
+    and Ability) reaches the human's fingertips only with its wrist flexed and moved. The
+    retargeter's wrist target is the human wrist pose composed with this offset
+    (``R* = R_h exp(rotvec)``, ``p* = p_h + R_h translation``). Measured, not designed:
+    ``retarget calibrate-wrist --hand NAME`` (:mod:`retarget.calibration`) prints it.
+    """
+
+    rotvec: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """[rad] rotation vector in MANO's wrist frame."""
+    translation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """[m] in MANO's wrist frame, at the robot's size (after ``HandModel.scale``)."""
+    source: str = ""
+    """How it was measured (command, demonstrations)."""
+
+    def __post_init__(self) -> None:
+        for name in ("rotvec", "translation"):
+            v = np.asarray(getattr(self, name), float)
+            if v.shape != (3,) or not np.isfinite(v).all():
+                raise HandModelError(f"WristOffset.{name} must be 3 finite numbers, got {v}")
+
+    @property
+    def R(self) -> np.ndarray:
+        """(3, 3) the rotation of ``rotvec``."""
+        from scipy.spatial.transform import Rotation
+
+        return Rotation.from_rotvec(np.asarray(self.rotvec, float)).as_matrix()
+
+    def apply(self, R_world_mano: np.ndarray, p_world_wrist: np.ndarray):
+        """The robot wrist targets ``(R (..., 3, 3), p (..., 3))`` for human wrist poses."""
+        R_h = np.asarray(R_world_mano, float)
+        p = np.asarray(p_world_wrist, float) + R_h @ np.asarray(self.translation, float)
+        return R_h @ self.R, p
+
+    def human_wrist(self, R_world_robot: np.ndarray, p_world_robot: np.ndarray):
+        """The inverse of :meth:`apply`: the human wrist poses ``(R, p)`` whose robot wrist
+        targets are the given poses."""
+        R_h = np.asarray(R_world_robot, float) @ self.R.T
+        p = np.asarray(p_world_robot, float) - R_h @ np.asarray(self.translation, float)
+        return R_h, p
+
+
 def _quat_wxyz(R: np.ndarray) -> np.ndarray:
     import mujoco
 
@@ -255,6 +303,8 @@ class HandModel:
     """Joint range overrides [rad] (e.g. where a published range is narrower than the source)."""
     contact: ContactParams = ContactParams()
     wrist_gains: WristGains = WristGains()
+    wrist_offset: WristOffset | None = None
+    """The wrist target's offset from the human wrist (:class:`WristOffset`); None: none."""
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
