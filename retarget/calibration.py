@@ -9,22 +9,27 @@ phalanges) reaches the human's fingertips only with its wrist flexed and moved, 
 pose objective, pulling towards the human's wrist pose, then holds every keypoint off.
 
 Measured here by retargeting demonstrations with the wrist free (both wrist weights 0, no
-object terms: keypoints, vectors, posture and smoothness alone) and averaging the robot wrist
-site's pose in the human wrist frame over every frame: the rotation by its chordal L2 mean
-(``scipy``'s ``Rotation.mean``), the translation by its mean. The demonstrations are generated
-ones by another operator and seed than the benchmarks use (``operator2``, seed 1) of pairs
-past the benchmarks' suites (from the 41st pair of their order), so the benchmarks judge the
-offset on motions and pairs it was not measured on. The result goes in the hand
-module as ``HandModel.wrist_offset``; ``Retargeter.human_targets`` then aims the wrist at the
-human wrist pose composed with it (``RetargetConfig.use_wrist_offset``).
+object terms, posture and smoothness off: keypoints and vectors alone, so nothing but the
+fingers places the wrist) and averaging the robot wrist site's pose in the human wrist frame
+over every frame: the rotation by its chordal L2 mean (``scipy``'s ``Rotation.mean``), the
+translation by its mean. Joints proximal to every keypoint (Shadow's WRJ1 and WRJ0,
+:func:`proximal_joints`) are held at their default: with the floating wrist free they would
+take up any wrist rotation (on a synthetic motion, Shadow's offset came out 11° wrong with
+them free, exact with them held). The demonstrations are generated ones by another operator
+and seed than the benchmarks use (``operator2``, seed 1) of pairs past the benchmarks'
+suites (from the 41st pair of their order), so the benchmarks judge the offset on motions
+and pairs it was not measured on. The result goes in the hand module as
+``HandModel.wrist_offset``; ``Retargeter.human_targets`` then aims the wrist at the human
+wrist pose composed with it (``RetargetConfig.use_wrist_offset``).
 
-Measured with ``benchmarks/retarget_speed_quality.py --n-pairs 20`` (operator1, seed 0), offsets
-from 8 pairs × 300 frames of operator2 (a /tmp prototype of this module, 2026-12-02), keypoint
-error and strict re-simulation success without → with: Inspire 20.15 → 17.89 mm, Ability
-15.62 → 14.26 mm, SVH 16.49 → 14.89 mm (the three together 37 → 37 % strict); Shadow 10.41 →
-10.32 mm, Allegro 19.09 → 18.53 mm, LEAP 19.13 → 19.04 mm (53 → 53 %). The same benchmark with
-the wrist rotation weight 0 instead (Inspire, Ability, SVH): 17.87 / 14.02 / 13.90 mm but strict
-success 35 → 25 % on Inspire.
+Measured with ``benchmarks/retarget_speed_quality.py --hands shadow allegro leap inspire
+ability svh --n-pairs 20`` (operator1, seed 0; 2026-12-02 without, 2026-12-03 with the
+offsets of 12 calibration pairs), keypoint error and strict re-simulation success without →
+with: Shadow 10.41 → 10.31 mm (65 → 65 %), Allegro 19.09 → 18.53 mm (30 → 25 %), LEAP 19.13
+→ 18.91 mm (65 → 50 %), Inspire 20.15 → 17.76 mm (35 → 25 %), Ability 15.62 → 14.19 mm (30
+→ 40 %), SVH 16.49 → 15.05 mm (45 → 45 %); all six 16.8 → 15.8 mm (dex-retargeting 14.9),
+45 → 42 % strict (dex-retargeting 13 %). The wrist rotation weight 0 instead (Inspire,
+Ability, SVH): 17.87 / 14.02 / 13.90 mm, Inspire's strict success 35 → 25 %.
 
 Run ``retarget calibrate-wrist --hand NAME``; it prints the ``WristOffset(...)`` to paste.
 """
