@@ -19,8 +19,8 @@ them free, exact with them held). The demonstrations are generated ones by anoth
 and seed than the benchmarks use (``operator2``, seed 1) of pairs past the benchmarks'
 suites (from the 41st pair of their order), so the benchmarks judge the offset on motions
 and pairs it was not measured on. The result goes in the hand module as
-``HandModel.wrist_offset``; ``Retargeter.human_targets`` then aims the wrist at the human
-wrist pose composed with it (``RetargetConfig.use_wrist_offset``).
+``HandModel.wrist_offset``; with ``RetargetConfig.use_wrist_offset`` on,
+``Retargeter.human_targets`` aims the wrist at the human wrist pose composed with it.
 
 Measured with ``benchmarks/retarget_speed_quality.py --hands shadow allegro leap inspire
 ability svh --n-pairs 20`` (operator1, seed 0; 2026-12-02 without, 2026-12-03 with the
@@ -29,7 +29,10 @@ with: Shadow 10.41 → 10.31 mm (65 → 65 %), Allegro 19.09 → 18.53 mm (30 �
 → 18.91 mm (65 → 50 %), Inspire 20.15 → 17.76 mm (35 → 25 %), Ability 15.62 → 14.19 mm (30
 → 40 %), SVH 16.49 → 15.05 mm (45 → 45 %); all six 16.8 → 15.8 mm (dex-retargeting 14.9),
 45 → 42 % strict (dex-retargeting 13 %). The wrist rotation weight 0 instead (Inspire,
-Ability, SVH): 17.87 / 14.02 / 13.90 mm, Inspire's strict success 35 → 25 %.
+Ability, SVH): 17.87 / 14.02 / 13.90 mm, Inspire's strict success 35 → 25 %. The offset is
+opt-in (``use_wrist_offset`` defaults to False) because it turns Allegro's hold of the heavy
+built-in cube with force matching (``retarget run --hand allegro --pair cube2H/tripod
+--forces``, 1.3 cm largest object error) into a drop (12.1 cm).
 
 Run ``retarget calibrate-wrist --hand NAME``; it prints the ``WristOffset(...)`` to paste.
 """

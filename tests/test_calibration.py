@@ -61,8 +61,8 @@ def test_calibrated_hands_have_offsets_the_gripper_none():
 def test_targets_follow_the_offset_and_the_switch_turns_it_off():
     traj = next(t for t in example_trajectories(seed=0) if t.scene == "cube2").slice(100, 130)
     hand = dataclasses.replace(get_hand("shadow"), wrist_offset=KNOWN)
-    on = Retargeter(hand, None, RetargetConfig())
-    off = Retargeter(hand, None, RetargetConfig(use_wrist_offset=False))
+    on = Retargeter(hand, None, RetargetConfig(use_wrist_offset=True))
+    off = Retargeter(hand, None, RetargetConfig())  # off by default
     t_on, t_off = on.human_targets(traj), off.human_targets(traj)
     R_h = aa_to_matrix(traj.hand.global_rot_aa.astype(np.float64))
     np.testing.assert_allclose(t_off["wrist_R"], R_h)
@@ -103,7 +103,7 @@ def test_calibration_recovers_a_known_offset(name):
     offset: the wrist-free solve puts the robot wrist back on the robot's poses, and the
     calibration returns that offset (the hand's own offset plays no part)."""
     truth = dataclasses.replace(get_hand(name), wrist_offset=KNOWN)
-    maker = Retargeter(truth, None, RetargetConfig())
+    maker = Retargeter(truth, None, RetargetConfig(use_wrist_offset=True))
     rng = np.random.default_rng(4)
     demos = [
         (f"motion{k}", human_from_robot_poses(maker, _robot_motion(maker, rng))) for k in (0, 1)
@@ -126,7 +126,8 @@ def test_calibration_recovers_a_known_offset(name):
     traj = demos[0][1]
     err = {}
     for label, o in (("calibrated", off), ("none", None)):
-        rt = Retargeter(dataclasses.replace(get_hand(name), wrist_offset=o), None, RetargetConfig())
+        hand = dataclasses.replace(get_hand(name), wrist_offset=o)
+        rt = Retargeter(hand, None, RetargetConfig(use_wrist_offset=True))
         out = rt.retarget(traj)
         err[label] = out.keypoint_err.mean()
         if o is not None:
