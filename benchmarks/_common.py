@@ -10,7 +10,7 @@ Two suites of the built-in generator (``dexcanvas_core.demos``):
   that uses them sees the same demonstrations for the same ``--seed``;
 * by group (``retarget_speed_quality.py``, ``force_preservation.py``): ``load_demonstrations``
   takes pairs in ``select_pairs`` order (spread evenly over power, intermediate, precision and
-  in-hand), one operator and seed, each demonstration cropped by ``crop_demo``.
+  in-hand), one operator and seed, each demonstration cropped by ``Trajectory.crop``.
 
 ``resim`` re-simulates a robot joint trajectory (``retarget.validate.Resimulator``) and adds the
 hand-below-the-table diagnostic (``table_penetration``).
@@ -150,21 +150,12 @@ def config_overrides(pairs, config_cls) -> dict:
 
 
 # ------------------------------------------------------------------ the group-spread suite
-def crop_demo(traj, max_frames: int | None):
-    """At most ``max_frames`` frames, starting a third of the window before the object moves."""
-    if max_frames is None or traj.num_frames <= max_frames:
-        return traj
-    start, _ = traj.active_range()
-    s = int(np.clip(start - max_frames // 3, 0, traj.num_frames - max_frames))
-    return traj.slice(s, s + max_frames)
-
-
 def load_demonstrations(cfg, console) -> tuple[list, str, list[dict]]:
     """``[(pair, trajectory)]``, the demonstrations' source, and the pairs that failed.
 
     ``cfg``: any object with ``n_pairs``, ``operator``, ``seed`` and ``max_frames`` (the
     benchmarks' ``BenchConfig``s). ``n_pairs`` generated demonstrations of the pairs in
-    :func:`select_pairs` order, an equal quota per group, each cropped by :func:`crop_demo`.
+    :func:`select_pairs` order, an equal quota per group, each cropped by ``Trajectory.crop``.
     """
     from dexcanvas_core.taxonomy import GROUPS
 
@@ -184,7 +175,7 @@ def load_demonstrations(cfg, console) -> tuple[list, str, list[dict]]:
             if traj.operator != cfg.operator or traj.scene in seen:
                 continue
             seen.add(traj.scene)
-            out.append((Pair.of(traj.scene, traj.gesture), crop_demo(traj, cfg.max_frames)))
+            out.append((Pair.of(traj.scene, traj.gesture), traj.crop(cfg.max_frames)))
         return out[: cfg.n_pairs], "dexcanvas_core.example.example_trajectories", []
 
     candidates = select_pairs(feasible_pairs())
@@ -203,7 +194,7 @@ def load_demonstrations(cfg, console) -> tuple[list, str, list[dict]]:
                 failed.append({"pair": str(p), "error": f"{type(e).__name__}: {e}"})
                 continue
             quota[g] -= 1
-            out.append((p, crop_demo(demo.trajectory, cfg.max_frames)))
+            out.append((p, demo.trajectory.crop(cfg.max_frames)))
             prog.advance(task)
             if len(out) == cfg.n_pairs:
                 break

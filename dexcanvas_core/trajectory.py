@@ -521,6 +521,15 @@ class Trajectory:
         ]
         return self._take(frames, self.timestamp[start:stop].copy(), moves, self.fps)
 
+    def crop(self, max_frames: int | None) -> Trajectory:
+        """At most ``max_frames`` frames, starting a third of the window before the objects
+        move (``active_range``); the trajectory itself when it is short enough or ``None``."""
+        if max_frames is None or self.num_frames <= max_frames:
+            return self
+        start, _ = self.active_range()
+        s = int(np.clip(start - max_frames // 3, 0, self.num_frames - max_frames))
+        return self.slice(s, s + max_frames)
+
     def active(self) -> Trajectory:
         """The frames in which objects move (see ``active_range``)."""
         return self.slice(*self.active_range())

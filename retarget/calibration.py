@@ -14,13 +14,14 @@ fingers places the wrist) and averaging the robot wrist site's pose in the human
 over every frame: the rotation by its chordal L2 mean (``scipy``'s ``Rotation.mean``), the
 translation by its mean. Joints proximal to every keypoint (Shadow's WRJ1 and WRJ0,
 :func:`proximal_joints`) are held at their default: with the floating wrist free they would
-take up any wrist rotation (on a synthetic motion, Shadow's offset came out 11° wrong with
-them free, exact with them held). The demonstrations are generated ones by another operator
-and seed than the benchmarks use (``operator2``, seed 1) of pairs past the benchmarks'
-suites (from the 41st pair of their order), so the benchmarks judge the offset on motions
-and pairs it was not measured on. The result goes in the hand module as
-``HandModel.wrist_offset``; with ``RetargetConfig.use_wrist_offset`` on,
-``Retargeter.human_targets`` aims the wrist at the human wrist pose composed with it.
+take up any wrist rotation (on a synthetic motion with a known offset, Shadow's came out 11°
+wrong with them free, within 0.5° with them held: ``tests/test_calibration.py``). The
+demonstrations are generated ones by another operator and seed than the benchmarks use
+(``operator2``, seed 1) of pairs past the benchmarks' suites (from the 41st pair of their
+order), so the benchmarks judge the offset on motions and pairs it was not measured on. The
+result goes in the hand module as ``HandModel.wrist_offset``; with
+``RetargetConfig.use_wrist_offset`` on, ``Retargeter.human_targets`` aims the wrist at the
+human wrist pose composed with it.
 
 Measured with ``benchmarks/retarget_speed_quality.py --hands shadow allegro leap inspire
 ability svh --n-pairs 20`` (operator1, seed 0; 2026-12-02 without, 2026-12-03 with the
@@ -121,8 +122,7 @@ def calibration_demos(
 ) -> list[tuple[object, object]]:
     """``n_pairs`` generated demonstrations ``[(pair, trajectory)]`` the hand can perform: the
     benchmarks' group-spread order of the feasible pairs (``spread_pairs``) from its ``skip``-th
-    pair on, each cropped to ``max_frames`` starting a third of the window before the object
-    moves."""
+    pair on, each cropped to ``max_frames`` (``Trajectory.crop``, as the benchmarks do)."""
     from dexcanvas_core.demos import feasible_pairs, generate_demo, spread_pairs
     from dexcanvas_core.demos import operator as operator_by_name
     from retarget.run import check_pair
@@ -144,11 +144,7 @@ def calibration_demos(
         except Exception as e:  # a pair the generator cannot script: take the next one
             log.info("calibration: %s skipped (%s)", p, e)
             continue
-        if max_frames is not None and traj.num_frames > max_frames:
-            start, _ = traj.active_range()
-            s = int(np.clip(start - max_frames // 3, 0, traj.num_frames - max_frames))
-            traj = traj.slice(s, s + max_frames)
-        out.append((p, traj))
+        out.append((p, traj.crop(max_frames)))
         if on_demo is not None:
             on_demo(str(p))
         if len(out) == n_pairs:

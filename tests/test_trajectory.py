@@ -106,6 +106,17 @@ def test_active_slice_and_contacts_follow():
     a.validate()
 
 
+def test_crop_starts_a_third_of_the_window_before_the_motion():
+    t = make_traj()  # 121 frames, the object moves over frames 30..89
+    c = t.crop(30)
+    assert c.num_frames == 30 and c.object_move[0].start_frame == 10  # 30 - 30 // 3 = frame 20
+    np.testing.assert_array_equal(c.hand.hand_pose, t.hand.hand_pose[20:50])
+    assert t.crop(None) is t and t.crop(121) is t
+    assert t.crop(110).num_frames == 110 and t.crop(110).hand.hand_pose[0].tolist() == (
+        t.hand.hand_pose[0].tolist()
+    )  # 30 - 36 < 0: clipped to the first frame
+
+
 def test_resample_hits_samples_and_interpolates_rotations():
     t = make_traj()
     r = t.resample(60.0)
