@@ -240,9 +240,9 @@ class WristOffset:
     @property
     def R(self) -> np.ndarray:
         """(3, 3) the rotation of ``rotvec``."""
-        from scipy.spatial.transform import Rotation
+        from dexcanvas_core.rotations import aa_to_matrix
 
-        return Rotation.from_rotvec(np.asarray(self.rotvec, float)).as_matrix()
+        return aa_to_matrix(np.asarray(self.rotvec, float))
 
     def apply(self, R_world_mano: np.ndarray, p_world_wrist: np.ndarray):
         """The robot wrist targets ``(R (..., 3, 3), p (..., 3))`` for human wrist poses."""
