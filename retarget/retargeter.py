@@ -581,23 +581,36 @@ class Retargeter:
         """Per robot finger, the collision geoms of the links that stand for the human's
         distal, middle and proximal phalanx (thumb: distal, proximal, metacarpal): the tip
         site's link, then the links towards the palm that have geoms (at most three; a
-        two-link finger's proximal link takes both the middle and the proximal phalanx)."""
+        two-link finger's proximal link takes both the middle and the proximal phalanx).
+
+        A link is a rigid group of bodies (MuJoCo's ``body_weldid``): a jointless body welded
+        to its parent belongs to the parent's link. Allegro's fingertips are such bodies
+        (``link_3.0_tip`` on ``link_3.0``); counted as links of their own, the distal
+        phalanx stood for the human's middle one, and on a fingertip contact the
+        non-contact clearance held it 2 mm off the object, the tip short of the surface
+        (built-in cube2/tripod: the middle finger 4 mm off the cube, 10 mm from its contact
+        point)."""
         chains = hand.hand_parts(m)
+        weld = m.body_weldid
+        geoms_of = lambda w: [g for g in self.scene.hand_geoms if weld[m.geom_bodyid[g]] == w]  # noqa: E731
         out = []
         for f, site in zip(self.tip_human, self.tip_sites, strict=True):
-            body = m.site_bodyid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, site)]
-            geoms = [g for g in self.scene.hand_geoms if m.geom_bodyid[g] == body]
+            link = weld[m.site_bodyid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, site)]]
+            geoms = geoms_of(link)
             if not geoms:
                 raise RetargetError(f"hand {hand.name!r}: no collision geom on {site}'s link")
             parts = [geoms]
             robot_finger = hand.fingers[f]
             # A robot finger several human fingers drive (a gripper's) keeps its tip only.
             shared = sum(v == robot_finger for v in hand.fingers.values()) > 1
-            chain = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b)
-                     for b in chains.get(robot_finger, [])]  # fmt: skip
-            if not shared and body in chain:
-                for b in reversed(chain[: chain.index(body)]):
-                    g = [x for x in self.scene.hand_geoms if m.geom_bodyid[x] == b]
+            links: list[int] = []  # the finger's links, palm to tip
+            for b in chains.get(robot_finger, []):
+                w = int(weld[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b)])
+                if w not in links:
+                    links.append(w)
+            if not shared and link in links:
+                for w in reversed(links[: links.index(link)]):
+                    g = geoms_of(w)
                     if g:
                         parts.append(g)
                     if len(parts) == 3:
@@ -1360,12 +1373,25 @@ class _MinkSolver:
         self.frame_dt = dt
         tasks = [self._task(o) for o in self.rt._objectives()]
         limits = [*self.limits, *(self._rows(x) for x in frame)]
-        for _ in range(iterations):
+        cfg = self.rt.cfg
+
+        def step(limits):
             v = mink.solve_ik(
-                conf, tasks, dt=1.0, solver=self.rt.cfg.solver, damping=self.rt.cfg.damping,
+                conf, tasks, dt=1.0, solver=cfg.solver, damping=cfg.damping,
                 limits=limits, constraints=self.constraints or None,
             )  # fmt: skip
             conf.integrate_inplace(v, 1.0)
-            if np.abs(v).max() < self.rt.cfg.step_tolerance:
+            return v
+
+        for _ in range(iterations):
+            if np.abs(step(limits)).max() < cfg.step_tolerance:
                 break
+        # The Pinocchio backend's end-of-step check (``_solve_frame``): while the solution is
+        # deeper than the margins, more steps in trust regions 4× smaller each time (Allegro's
+        # proximal box on the cube's face flipped between two rows: 3–4 mm deep every other
+        # frame without them).
+        for fixes in range(1, cfg.max_feasibility_iterations + 1):
+            if not self.rt._penetrates(conf.q[: self.rt.nq]):
+                break
+            step([*limits, self._rows(VelocityLimit(cfg.max_joint_speed * 0.25**fixes))])
         return conf.q.copy()

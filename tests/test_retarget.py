@@ -138,9 +138,10 @@ def test_surface_contact_jacobian_matches_finite_differences(demo, part):
     rt.scene.set_object_pose(demo.object.pos[t], demo.object.rot_aa[t])
     F = len(rt.tip_sites)
     rt.contacts.set_contacts(np.ones(F, bool), tg["contact_points"][t], np.full(F, part))
-    bodies = {b for b, _ in rt.contacts.finger_points(rt.q_default)}
-    tips = {rt.scene.model.body(rt.scene.model.site(s).bodyid[0]).name for s in rt.tip_sites}
-    assert (bodies == tips) == (part == 0)  # the middle and proximal links are not the tips'
+    m = rt.scene.model
+    links = {int(m.body_weldid[m.body(b).id]) for b, _ in rt.contacts.finger_points(rt.q_default)}
+    tips = {int(m.body_weldid[m.site(s).bodyid[0]]) for s in rt.tip_sites}
+    assert (links == tips) == (part == 0)  # the middle and proximal links are not the tips'
 
     q = rt.q_default.copy()
     q[:6] = [*tg["wrist_p"][t], 0, 0, 0]
@@ -456,6 +457,38 @@ def test_link_contacts_hold_a_lateral_pinch_on_the_thumb_pad():
     r = on.retarget(traj)
     assert np.nanmedian(r.contact_err[pad, thumb]) < 0.003
     assert -r.min_distance.min() <= on.cfg.penetration_margin + 5e-4
+
+
+def test_a_fingertip_body_belongs_to_its_distal_link():
+    """Allegro's fingertips are jointless bodies on the distal links (``link_7.0_tip`` on
+    ``link_7.0``): one rigid link, so one contact part (MuJoCo's weld groups), and the next
+    parts are the middle and proximal links. Counted as a part of its own, the distal link
+    stood for the human's middle phalanx and kept the non-contact clearance from the cube
+    where the human's fingertip touched it: on the built-in cube2/tripod the middle finger
+    hovered 4 mm off the cube; now its distal link touches it."""
+    from dexcanvas_core.loaders.selection import load_demonstration
+
+    traj = load_demonstration("cube2/tripod")
+    rt = Retargeter(get_hand("allegro"), object_geometry(traj.object.name))
+    m = rt.scene.model
+    links = [[{int(m.body_weldid[m.geom_bodyid[g]]) for g in gs} for gs in parts]
+             for parts in rt.contacts.part_geoms]  # fmt: skip
+    for f, parts in enumerate(links):
+        assert all(len(p) == 1 for p in parts), (rt.tip_human[f], parts)
+        assert len({next(iter(p)) for p in parts}) == 3, (rt.tip_human[f], parts)  # 3 links
+        bodies = {m.body(m.geom_bodyid[g]).name for g in rt.contacts.part_geoms[f][0]}
+        assert any(b.endswith("_tip") for b in bodies) and len(bodies) == 2, bodies
+    tg = rt.human_targets(traj)
+    mid = rt.tip_human.index("middle")
+    on = np.flatnonzero(tg["contact_active"][:, mid] & (tg["contact_part"][:, mid] == 0))
+    assert on.size > 100
+    r = rt.retarget(traj)
+    gap = []
+    for t in on[::10]:
+        rt.scene.set_object_pose(traj.object.pos[t], traj.object.rot_aa[t])
+        rt.contacts.set_contacts(tg["contact_active"][t], tg["contact_points"][t])
+        gap.append(rt.contacts.finger_distances(r.q[t])[mid])
+    assert np.median(gap) < 1e-3, np.median(gap)
 
 
 def test_contact_parts_are_validated():

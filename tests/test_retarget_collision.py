@@ -292,9 +292,10 @@ def test_contact_sweep_follows_the_object(demo_cube):
     """Same q, object moved: the sweep must not reuse the previous pose's contacts."""
     rt = Retargeter(get_hand("allegro"), object_geometry("cube2"))
     tg = rt.human_targets(demo_cube)
-    t = int(np.flatnonzero(tg["contact_active"].any(axis=1))[0])
-    rt.scene.set_object_pose(demo_cube.object.pos[t], demo_cube.object.rot_aa[t])
-    q = rt.retarget(demo_cube).q[t]  # fingers on the cube
+    r = rt.retarget(demo_cube)
+    on = np.flatnonzero(tg["contact_active"].any(axis=1))
+    t = int(on[np.argmin(r.min_distance[on])])
+    q = r.q[t]  # fingers on the cube
     obj = set(rt.scene.object_geoms)
 
     def to_object(limit):  # (the table may be as near as the cube: it is left out)
