@@ -225,6 +225,37 @@ def test_coupling_rows_hold_after_solving():
     assert q[1] == pytest.approx(0.7 * q[0] + 0.1 * q[0] ** 2, abs=1e-6)
 
 
+@pytest.mark.parametrize("hand_name", ["svh", "inspire", "ability"])
+def test_coupling_rows_linearise_the_residual(hand_name):
+    """Each equality row is ``A Δq = b`` with ``b = −r(q)`` and ``A = ∂r/∂q`` for the
+    coupling residual ``r = a₁ᵀq − p(a₂ᵀq)`` (MuJoCo's polycoef), checked against
+    ``np.polyval`` and central differences at random joint positions."""
+    from retarget.hands import get_hand
+
+    m = get_hand(hand_name).build_spec().compile()
+    coupling = CouplingLimit.from_mjmodel(m)
+    assert coupling.rows, hand_name
+    A1 = np.array([a1 for a1, _, _ in coupling.rows])
+    A2 = np.array([a2 for _, a2, _ in coupling.rows])
+    C = np.array([c for _, _, c in coupling.rows])
+
+    def residual(q):
+        return A1 @ q - np.array([np.polyval(c[::-1], x) for c, x in zip(C, A2 @ q, strict=True)])
+
+    rng = np.random.default_rng(3)
+    kin = PinocchioKinematics(m)
+    for _ in range(3):
+        q = rng.uniform(-0.5, 1.0, m.nv)
+        A, b = coupling.equalities(_state(kin, q))
+        np.testing.assert_allclose(b, -residual(q), atol=1e-12)
+        eps = 1e-6
+        J = np.stack(
+            [(residual(q + eps * e) - residual(q - eps * e)) / (2 * eps) for e in np.eye(m.nv)],
+            axis=1,
+        )
+        np.testing.assert_allclose(A, J, atol=1e-8)
+
+
 TENDON_COUPLED = """
 <mujoco>
   <worldbody>

@@ -23,13 +23,6 @@ from retarget.limits.base import Limit
 from retarget.state import RobotState
 
 
-def _poly(c: np.ndarray, x: float) -> tuple[float, float]:
-    """``(p(x), p'(x))`` for ``p = c0 + c1 x + … + c4 x⁴``."""
-    val = sum(c[k] * x**k for k in range(5))
-    der = sum(k * c[k] * x ** (k - 1) for k in range(1, 5))
-    return float(val), float(der)
-
-
 class CouplingLimit(Limit):
     """Equality rows ``a₁ᵀΔq − p'(s₂) a₂ᵀΔq = −(s₁ − p(s₂))`` with ``sᵢ = aᵢᵀq``."""
 
@@ -65,6 +58,15 @@ class CouplingLimit(Limit):
             self._lo = np.array([lo for _, lo, _ in multi])
             self._hi = np.array([hi for _, _, hi in multi])
         self._multi = bool(multi)
+        # The equality rows stacked (one matrix product and one polynomial evaluation for all
+        # of them per iterate instead of a Python loop: SVH's 11 couplings took 7.6 % of its
+        # solve time that way).
+        if rows:
+            self._A1 = np.array([a1 for a1, _, _ in rows])
+            self._A2 = np.array([a2 for _, a2, _ in rows])
+            C = np.array([c for _, _, c in rows])  # (k, 5)
+            self._C = C
+            self._dC = C[:, 1:] * np.arange(1, 5)  # p' coefficients (k, 4)
 
     def __bool__(self) -> bool:
         return bool(self.rows or self.ranges)
@@ -116,15 +118,15 @@ class CouplingLimit(Limit):
     def equalities(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         if not self.rows:
             return np.zeros((0, state.nv)), np.zeros(0)
-        A, b = [], []
-        for a1, a2, coef in self.rows:
-            s1, s2 = float(a1 @ state.q), float(a2 @ state.q)
-            # MuJoCo's joint/tendon equality is relative to the reference configuration; with
-            # qpos0 = 0 for the hands, the offsets vanish.
-            p, dp = _poly(coef, s2)
-            A.append(a1 - dp * a2)
-            b.append(-(s1 - p))
-        return np.array(A), np.array(b)
+        nv = state.nv
+        A1, A2 = self._A1[:, :nv], self._A2[:, :nv]
+        s1, s2 = A1 @ state.q, A2 @ state.q
+        # MuJoCo's joint/tendon equality is relative to the reference configuration; with
+        # qpos0 = 0 for the hands, the offsets vanish.
+        powers = s2[:, None] ** np.arange(5)  # (k, 5): 1, s, s², s³, s⁴
+        p = np.add.reduce(self._C * powers, axis=1)
+        dp = np.add.reduce(self._dC * powers[:, :4], axis=1)
+        return A1 - dp[:, None] * A2, p - s1
 
 
 def _fixed_tendon_coefficients(m: mujoco.MjModel, tendon: int) -> np.ndarray:
