@@ -127,11 +127,16 @@ class RetargetConfig:
     w_wrist_rot: float = 0.15
     """Weight of the wrist's rotation error [per rad²]; the keypoint error's main lever (a
     radian weighed like a metre holds every fingertip off by the human wrist's orientation).
-    benchmarks/retarget_speed_quality.py, all 7 hands × 20 pairs, 0.15 → 0.05: keypoint error
-    19.54 → 18.21 mm, contact-point error 11.05 → 9.76 mm, strict re-sim success 40 → 40 %;
-    force matching's five-finger strict success unchanged (46.3 %). Not lowered because the
-    heavy cube of ``retarget run --hand allegro --pair cube2H/tripod --forces`` then drops
-    (9.5 cm; see the README)."""
+    benchmarks/retarget_speed_quality.py, all 7 hands × 20 pairs (2026-12-03), 0.15 → 0.05:
+    keypoint error 19.54 → 18.21 mm, contact-point error 11.05 → 9.76 mm, strict re-sim
+    success 40 → 40 %, force matching's five-finger strict success (variant (d) of
+    benchmarks/force_preservation.py on its 27 reproduced human simulations) 46.3 → 46.3 %;
+    but the heavy cube of ``retarget run --hand allegro --pair cube2H/tripod --forces`` drops
+    (9.5 cm). With ``joint_limit_margin`` 0.1 as well: 18.82 mm, 10.17 mm, 39 %, force matching
+    48.1 % (LEAP 66.7 → 74.1 %), the heavy cube held (0.97 cm); not the default yet because a
+    non-contact link then ends one frame 0.2 mm from the object instead of the 2 mm clearance
+    (Shadow, the example cube2, frame 115: a 24 mm step at a contact onset, which the
+    end-of-step check does not catch; ``test_links_the_human_keeps_clear_stay_clear``)."""
     w_tips: float = 1.0
     w_joints: float = 1.0
     w_vectors: float = 1.0
@@ -153,6 +158,19 @@ class RetargetConfig:
     w_smooth: float = 0.05
     damping: float = 1e-5
     """Levenberg–Marquardt damping of the step."""
+    joint_limit_margin: float = 0.0
+    """How far [rad or m] the kinematic solution keeps each finger joint inside its range (at
+    most a quarter of the range; 0: the whole range). The servo commands keep the whole range.
+    A joint resting on its limit cannot press: Allegro's middle distal joint on its extension
+    limit (−0.227 rad) on the built-in cube2/tripod, its pad on the cube's top edge, squeezed
+    sideways by the abduction joint (2.8–3.1 N along the cube's face against 1.4 N planned)
+    while the index pressed 1.0–1.5 N instead of 4.2: the cube turned in the grasp, and the
+    heavy cube of ``--forces`` stayed held only at ``w_wrist_rot`` 0.15 (0.15, 0.1, 0.05 hold
+    it with the margin: 0.89, 0.91, 0.97 cm; 0.02 drops it, 9.7 cm). Off by default: with
+    benchmarks/retarget_speed_quality.py (7 hands × 20 pairs) at ``w_wrist_rot`` 0.15, 0 → 0.1:
+    keypoint error 19.54 → 20.17 mm, strict 40 → 39 % (Allegro 25 → 40 %, Inspire 35 → 20 %,
+    SVH 45 → 35 %), force matching five-finger 46.3 → 42.6 %; with ``w_wrist_rot`` 0.05 see
+    there."""
     use_wrist_offset: bool = False
     """Aim the wrist at the human wrist pose composed with the hand's calibrated
     ``HandModel.wrist_offset`` (``retarget calibrate-wrist``), where its fingers match the
@@ -316,6 +334,7 @@ class RetargetConfig:
             "self_collision_margin",
             "table_clearance",
             "contact_ramp_s",
+            "joint_limit_margin",
         ):
             v = getattr(self, k)
             if not (np.isfinite(v) and v >= 0):
@@ -508,7 +527,14 @@ class Retargeter:
         lower = np.where(m.jnt_limited[: self.nq], m.jnt_range[: self.nq, 0], -np.inf)
         upper = np.where(m.jnt_limited[: self.nq], m.jnt_range[: self.nq, 1], np.inf)
         self.lower, self.upper = lower, upper
-        self.limits = [JointLimit(lower, upper, m.jnt_limited[: self.nq].astype(bool))]
+        # The kinematic solution keeps the finger joints joint_limit_margin inside their ranges
+        # (at most a quarter of a range); the servo commands (the grip's squeeze) keep the whole
+        # range, so a finger resting near a limit can still press.
+        inner = np.minimum(c.joint_limit_margin, 0.25 * (upper - lower))
+        inner[:6] = 0.0  # the wrist's coordinates
+        self._solve_lower, self._solve_upper = lower + inner, upper - inner
+        limited = m.jnt_limited[: self.nq].astype(bool)
+        self.limits = [JointLimit(self._solve_lower, self._solve_upper, limited)]
         coupling = CouplingLimit.from_mjmodel(m)
         if coupling:
             self.limits.append(coupling)
@@ -1193,7 +1219,7 @@ class Retargeter:
         q0[:6] += dw
         if (active[t] == active[t - 1]).all() and (active[t - 1] == active[t - 2]).all():
             q0[6:] += q[6:] - Q_last[0, 6:]
-        q0 = self._within_limits(q0)
+        q0 = np.minimum(np.maximum(q0, self._solve_lower), self._solve_upper)
         return q if self._too_deep(q0) else q0
 
     def _within_limits(self, q: np.ndarray) -> np.ndarray:

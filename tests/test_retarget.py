@@ -491,6 +491,34 @@ def test_a_fingertip_body_belongs_to_its_distal_link():
     assert np.median(gap) < 1e-3, np.median(gap)
 
 
+def test_joint_limit_margin_keeps_finger_joints_inside_their_ranges():
+    """``joint_limit_margin`` keeps every finger joint of the kinematic solution that far inside
+    its range (at most a quarter of it), the wrist's coordinates untouched; the grip's servo
+    commands may still use the whole range. On the built-in cube2/tripod Allegro's middle
+    distal joint rests on its extension limit without the margin (its pad on the cube's top
+    edge) and 0.1 rad inside it with."""
+    from dexcanvas_core.loaders.selection import load_demonstration
+
+    traj = load_demonstration("cube2/tripod").slice(250, 400)
+    geom = object_geometry(traj.object.name)
+    hand = get_hand("allegro")
+    plain = Retargeter(hand, geom, RetargetConfig(joint_limit_margin=0.0))
+    inner = Retargeter(hand, geom, RetargetConfig(joint_limit_margin=0.1))
+    j7 = plain.kin.joint_names.index("joint_7.0")
+    q0 = plain.retarget(traj).q
+    assert np.isclose(q0[:, j7], plain.lower[j7], atol=1e-3).mean() > 0.9
+    r = inner.retarget(traj)
+    m = np.minimum(0.1, 0.25 * (inner.upper - inner.lower))
+    fingers = slice(6, inner.nq)
+    tol = inner.cfg.step_tolerance
+    assert (r.q[:, fingers] >= (inner.lower + m)[fingers] - tol).all()
+    assert (r.q[:, fingers] <= (inner.upper - m)[fingers] + tol).all()
+    assert r.q[:, j7].min() > inner.lower[j7] + 0.1 - tol
+    assert (r.q_command >= inner.lower - 1e-9).all() and (r.q_command <= inner.upper + 1e-9).all()
+    with pytest.raises(RetargetError, match="joint_limit_margin"):
+        RetargetConfig(joint_limit_margin=-0.1).validate()
+
+
 def test_contact_parts_are_validated():
     rt = Retargeter(get_hand("allegro"), object_geometry("cube2"))
     F = len(rt.tip_sites)
