@@ -163,8 +163,8 @@ class RetargetConfig:
     most a quarter of the range; 0: the whole range). The servo commands keep the whole range.
     A joint resting on its limit cannot press: Allegro's middle distal joint on its extension
     limit (−0.227 rad) on the built-in cube2/tripod, its pad on the cube's top edge, squeezed
-    sideways by the abduction joint (2.8–3.1 N along the cube's face against 1.4 N planned)
-    while the index pressed 1.0–1.5 N instead of 4.2: the cube turned in the grasp, and the
+    sideways by the abduction joint (2.7–3.3 N along the cube's face against 1.4 N planned)
+    while the index pressed 0.5–1.4 N instead of 4.2: the cube turned in the grasp, and the
     heavy cube of ``--forces`` stayed held only at ``w_wrist_rot`` 0.15 (0.15, 0.1, 0.05 hold
     it with the margin: 0.89, 0.91, 0.97 cm; 0.02 drops it, 9.7 cm). Off by default: with
     benchmarks/retarget_speed_quality.py (7 hands × 20 pairs) at ``w_wrist_rot`` 0.15, 0 → 0.1:
