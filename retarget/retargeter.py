@@ -1177,11 +1177,12 @@ class Retargeter:
             if fixes >= extra or not self._penetrates(q):
                 return q
             fixes += 1
-            limits = [
-                *self.limits,
-                VelocityLimit(self.cfg.max_joint_speed * 0.25**fixes),
-                *frame,
-            ]
+            limits = [*self.limits, self._trust_region(fixes), *frame]
+
+    def _trust_region(self, fixes: int) -> VelocityLimit:
+        """The velocity bound of an end-of-step re-step (both backends): ``fixes`` (≥ 1)
+        times 4× smaller than the per-iterate bound."""
+        return VelocityLimit(self.cfg.max_joint_speed * 0.25**fixes)
 
     def _solve_step(self, state: RobotState, objectives, limits) -> np.ndarray:
         """One QP step. If it is infeasible because a penetrating pair cannot back out as
@@ -1219,13 +1220,15 @@ class Retargeter:
         q0[:6] += dw
         if (active[t] == active[t - 1]).all() and (active[t - 1] == active[t - 2]).all():
             q0[6:] += q[6:] - Q_last[0, 6:]
-        q0 = np.minimum(np.maximum(q0, self._solve_lower), self._solve_upper)
+        q0 = self._within_limits(q0, solver=True)
         return q if self._too_deep(q0) else q0
 
-    def _within_limits(self, q: np.ndarray) -> np.ndarray:
-        """``q`` clipped to the joint ranges (``np.clip`` costs 2.3× as much on 30 dofs: 3.2
-        against 1.4 µs)."""
-        return np.minimum(np.maximum(q, self.lower), self.upper)
+    def _within_limits(self, q: np.ndarray, solver: bool = False) -> np.ndarray:
+        """``q`` clipped to the joint ranges (``solver``: the kinematic solution's, inside
+        them by ``joint_limit_margin``; else the servo commands' whole ranges). ``np.clip``
+        costs 2.3× as much on 30 dofs: 3.2 against 1.4 µs."""
+        lo, hi = (self._solve_lower, self._solve_upper) if solver else (self.lower, self.upper)
+        return np.minimum(np.maximum(q, lo), hi)
 
     def _too_deep(self, q: np.ndarray) -> bool:
         """Whether ``q`` is deeper than a collision limit's margin + 0.5 mm anywhere (one
@@ -1426,5 +1429,5 @@ class _MinkSolver:
         for fixes in range(1, cfg.max_feasibility_iterations + 1):
             if not self.rt._penetrates(conf.q[: self.rt.nq]):
                 break
-            step([*limits, self._rows(VelocityLimit(cfg.max_joint_speed * 0.25**fixes))])
+            step([*limits, self._rows(self.rt._trust_region(fixes))])
         return conf.q.copy()

