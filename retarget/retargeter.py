@@ -1170,11 +1170,13 @@ class Retargeter:
                 continue
             # The rows are linear in the step; a finger sliding or turning on a curved surface
             # (or a box fingertip rolling onto its edge) can end the step deeper than the
-            # margin. Check the end point and take more steps while it penetrates, each in a
-            # trust region 4× smaller than the last: at full speed the linearisation can flip
-            # between two rows every step (LEAP's index finger on the built-in
-            # cylinder2/extension_type: 0.17 rad steps, 2.2 mm deep after 10 of them).
-            if fixes >= extra or not self._penetrates(q):
+            # margin, or inside a clearance (Shadow's middle proximal swinging round the
+            # example cube2's edge from 24 mm off, outside every row: 0.2 mm from the cube
+            # instead of 2). Check the end point and take more steps while it violates a
+            # margin, each in a trust region 4× smaller than the last: at full speed the
+            # linearisation can flip between two rows every step (LEAP's index finger on the
+            # built-in cylinder2/extension_type: 0.17 rad steps, 2.2 mm deep after 10 of them).
+            if fixes >= extra or not self._violates_margins(q):
                 return q
             fixes += 1
             limits = [*self.limits, self._trust_region(fixes), *frame]
@@ -1238,14 +1240,16 @@ class Retargeter:
                 return True
         return False
 
-    def _penetrates(self, q: np.ndarray) -> bool:
-        """Whether ``q`` goes deeper than the collision limits' margins (plus 0.5 mm).
+    def _violates_margins(self, q: np.ndarray) -> bool:
+        """Whether some pair at ``q`` is closer than its margin allows, by more than 0.5 mm:
+        deeper than the penetration margin, or inside a clearance (a link the human keeps
+        clear of the object, the table).
 
-        Only the pairs within 5 mm at the last linearisation are checked
-        (``CollisionLimit.near_min_distance``: a step from farther away would need a joint
-        speed the velocity rows rarely allow)."""
+        Only the pairs near at the last linearisation are checked
+        (``CollisionLimit.near_violation``: a step from farther away would need a joint speed
+        the velocity rows rarely allow)."""
         for lim in (self.collision, self.self_collision):
-            if lim is not None and lim.near_min_distance(q) < -(lim.margin + 5e-4):
+            if lim is not None and lim.near_violation(q) < -5e-4:
                 return True
         return False
 
@@ -1427,7 +1431,7 @@ class _MinkSolver:
         # proximal box on the cube's face flipped between two rows: 3–4 mm deep every other
         # frame without them).
         for fixes in range(1, cfg.max_feasibility_iterations + 1):
-            if not self.rt._penetrates(conf.q[: self.rt.nq]):
+            if not self.rt._violates_margins(conf.q[: self.rt.nq]):
                 break
             step([*limits, self._rows(self.rt._trust_region(fixes))])
         return conf.q.copy()

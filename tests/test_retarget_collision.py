@@ -359,27 +359,36 @@ def test_rows_when_every_pair_is_per_pair():
 
 
 def test_end_of_step_check_sees_the_near_pairs_as_the_sweep_does(demo_cube):
-    """``near_min_distance`` (the end-of-step penetration check: one mj_geomDistance per pair
-    that was within 5 mm at the linearisation) gives the sweep's distance for those pairs at a
-    moved configuration, for the hand–object and the self pairs; the sweep's cached contacts
-    stay valid (it runs on its own MjData)."""
+    """``near_violation`` (the end-of-step check: one mj_geomDistance per pair that was within
+    5 mm of its allowed distance at the linearisation) gives the sweep's distance plus the
+    pair's margin for those pairs at a moved configuration, for the hand–object and the self
+    pairs; the sweep's cached contacts stay valid (it runs on its own MjData)."""
     rt = Retargeter(get_hand("allegro"), object_geometry("cube2"))
     r = rt.retarget(demo_cube)
+    margins = rt._frame_margins(rt.human_targets(demo_cube)["contact_by_part"])  # (T, pairs)
     rng = np.random.default_rng(3)
-    checked = 0
+    checked = widened = 0
     for t in np.flatnonzero(r.min_distance < 0.003)[::15]:
         rt.scene.set_object_pose(demo_cube.object.pos[t], demo_cube.object.rot_aa[t])
         q = r.q[t]
         rt.kin.forward(q)
+        rt.collision.pair_margins = margins[t]  # the frame's clearances, as in retarget()
         for lim in (rt.collision, rt.self_collision):
             lim.inequalities(RobotState(q=q, kin=rt.kin))
             near = lim._near
+            at_q = lim.query(q)
+            k = np.isin(at_q.index, near)
+            # Clearance pairs are near from farther out: within NEAR of their clearance.
+            widened += int(np.sum(k & (at_q.distance >= lim.NEAR)))
+            clear = np.minimum(lim.pair_margins[at_q.index[k]], 0.0)
+            assert (at_q.distance[k] + clear < lim.NEAR).all()
             q2 = q + rng.normal(0.0, 0.02, q.size) * (np.arange(q.size) >= 6)
-            got = lim.near_min_distance(q2)
+            got = lim.near_violation(q2)
             before = lim.sweep.dist.copy()
             ref = lim.query(q2)
             keep = np.isin(ref.index, near)
-            want = ref.distance[keep].min() if keep.any() else np.inf
+            v = ref.distance[keep] + lim.pair_margins[ref.index[keep]]
+            want = v.min() if keep.any() else np.inf
             if np.isfinite(want) and want < lim.NEAR:
                 assert got == pytest.approx(want, abs=1e-9)
                 checked += 1
@@ -387,4 +396,5 @@ def test_end_of_step_check_sees_the_near_pairs_as_the_sweep_does(demo_cube):
                 assert got >= min(want, lim.NEAR) - 1e-9
             lim.query(q)  # back at q: the cached sweep answers as before
             np.testing.assert_array_equal(lim.sweep.dist, before)
-    assert checked >= 5
+    rt.collision.pair_margins = rt._base_margins.copy()
+    assert checked >= 5 and widened >= 1, (checked, widened)

@@ -294,7 +294,7 @@ class CollisionLimit(Limit):
         self.hold_only = False
         """Rows only forbid going deeper (``h ≥ 0``) instead of asking a penetrating pair to
         back out: the solver's fallback when backing out is infeasible (joint limits)."""
-        self._near = np.zeros(0, int)  # pairs within NEAR at the last inequalities()
+        self._near = np.zeros(0, int)  # pairs near at the last inequalities() (near_violation)
         self._check_data: mujoco.MjData | None = None
         self._body_names = [
             mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(model.nbody)
@@ -498,19 +498,23 @@ class CollisionLimit(Limit):
         return r
 
     NEAR = 0.005
-    """Pairs within this [m] at a linearisation are the ones :meth:`near_min_distance` checks
-    after the step."""
+    """Pairs within this [m] of their allowed distance (``−pair_margin`` where that is a
+    clearance, else 0) at a linearisation are the ones :meth:`near_violation` checks after the
+    step."""
 
-    def near_min_distance(self, q: np.ndarray) -> float:
-        """Smallest signed distance [m] at ``q`` over the pairs that were within :attr:`NEAR`
-        at the last :meth:`inequalities` (``inf`` if none).
+    def near_violation(self, q: np.ndarray) -> float:
+        """Smallest ``d + pair_margin`` [m] at ``q`` (negative: the pair is closer than its
+        margin allows) over the pairs that were near at the last :meth:`inequalities`: within
+        :attr:`NEAR` of contact, or of their clearance where the margin is negative (a link the
+        human keeps clear of the object, the table). ``inf`` if none.
 
         The end-of-step check: the rows are linear, so a pair near contact can end the step
-        deeper than its margin (a finger turning on a curved surface). Pairs farther than
-        ``NEAR`` would need a longer step than the velocity rows allow to go in. One
-        ``mj_kinematics`` and one ``mj_geomDistance`` per near pair (the same distance as the
-        sweep's, see the module docstring) instead of a sweep of the whole scene: on Shadow,
-        built-in cube2/tripod, ~20 µs instead of ~180 µs per frame.
+        closer than its margin (a finger turning on a curved surface, a link swinging round
+        the cube's edge). Pairs farther than that would need a longer step than the velocity
+        rows allow to get there. One ``mj_kinematics`` and one ``mj_geomDistance`` per near
+        pair (the same distance as the sweep's, see the module docstring) instead of a sweep
+        of the whole scene: on Shadow, built-in cube2/tripod, ~20 µs instead of ~180 µs per
+        frame.
         """
         if not self._near.size:
             return np.inf
@@ -523,16 +527,19 @@ class CollisionLimit(Limit):
         d.qpos[: self.hand_nq] = q
         d.mocap_pos[:], d.mocap_quat[:] = self.data.mocap_pos, self.data.mocap_quat
         mujoco.mj_kinematics(m, d)
-        ga, gb = self._ga_list, self._gb_list
+        ga, gb, pm = self._ga_list, self._gb_list, self.pair_margins
+        reach = self.NEAR + max(0.0, -float(pm[self._near].min()))
         return min(
-            mujoco.mj_geomDistance(m, d, ga[i], gb[i], self.NEAR, None) for i in self._near.tolist()
+            mujoco.mj_geomDistance(m, d, ga[i], gb[i], reach, None) + pm[i]
+            for i in self._near.tolist()
         )
 
     def inequalities(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         closest = self.query(state.q)
         r = self._with_further(closest)  # (row_points)
         # Each pair's closest points are query()'s row, so its near pairs are unique there.
-        self._near = closest.index[closest.distance < self.NEAR]
+        clear = np.minimum(self.pair_margins[closest.index], 0.0)  # −clearance, else 0
+        self._near = closest.index[closest.distance + clear < self.NEAR]
         if not r.distance.size:
             return np.zeros((0, state.nv)), np.zeros(0)
         n = r.normal
