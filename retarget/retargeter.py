@@ -133,10 +133,9 @@ class RetargetConfig:
     benchmarks/force_preservation.py on its 27 reproduced human simulations) 46.3 → 46.3 %;
     but the heavy cube of ``retarget run --hand allegro --pair cube2H/tripod --forces`` drops
     (9.5 cm). With ``joint_limit_margin`` 0.1 as well: 18.82 mm, 10.17 mm, 39 %, force matching
-    48.1 % (LEAP 66.7 → 74.1 %), the heavy cube held (0.97 cm); not the default yet because a
-    non-contact link then ends one frame 0.2 mm from the object instead of the 2 mm clearance
-    (Shadow, the example cube2, frame 115: a 24 mm step at a contact onset, which the
-    end-of-step check does not catch; ``test_links_the_human_keeps_clear_stay_clear``)."""
+    48.1 % (LEAP 66.7 → 74.1 %), the heavy cube held (0.97 cm); the wrist offset
+    (``use_wrist_offset``) was taken instead (18.58 mm, 10.36 mm, 39 %; with it 0.05 drops the
+    heavy cube again, 11.1 cm, even with a 0.1 rad joint limit margin)."""
     w_tips: float = 1.0
     w_joints: float = 1.0
     w_vectors: float = 1.0
@@ -158,27 +157,31 @@ class RetargetConfig:
     w_smooth: float = 0.05
     damping: float = 1e-5
     """Levenberg–Marquardt damping of the step."""
-    joint_limit_margin: float = 0.0
+    joint_limit_margin: float | None = None
     """How far [rad or m] the kinematic solution keeps each finger joint inside its range (at
-    most a quarter of the range; 0: the whole range). The servo commands keep the whole range.
-    A joint resting on its limit cannot press: Allegro's middle distal joint on its extension
-    limit (−0.227 rad) on the built-in cube2/tripod, its pad on the cube's top edge, squeezed
-    sideways by the abduction joint (2.7–3.3 N along the cube's face against 1.4 N planned)
-    while the index pressed 0.5–1.4 N instead of 4.2: the cube turned in the grasp, and the
-    heavy cube of ``--forces`` stayed held only at ``w_wrist_rot`` 0.15 (0.15, 0.1, 0.05 hold
-    it with the margin: 0.89, 0.91, 0.97 cm; 0.02 drops it, 9.7 cm). Off by default: with
-    benchmarks/retarget_speed_quality.py (7 hands × 20 pairs) at ``w_wrist_rot`` 0.15, 0 → 0.1:
-    keypoint error 19.54 → 20.17 mm, strict 40 → 39 % (Allegro 25 → 40 %, Inspire 35 → 20 %,
-    SVH 45 → 35 %), force matching five-finger 46.3 → 42.6 %; with ``w_wrist_rot`` 0.05 see
-    there."""
-    use_wrist_offset: bool = False
+    most a quarter of the range; 0: the whole range; None: the hand's own,
+    ``HandModel.joint_limit_margin``, 0 but on Allegro). The servo commands keep the whole
+    range. A joint resting on its limit cannot press: Allegro's middle distal joint on its
+    extension limit (−0.227 rad) on the built-in cube2/tripod, its pad on the cube's top edge,
+    squeezed sideways by the abduction joint (2.7–3.3 N along the cube's face against 1.4 N
+    planned) while the index pressed 0.5–1.4 N instead of 4.2: the cube turned in the grasp,
+    and the heavy cube of ``--forces`` stayed held only with the human wrist's own pose (with
+    the calibrated wrist offset it dropped, 12.1 cm; with the offset and 0.05 rad, Allegro's
+    default, it is held: 1.06 cm). Not a margin for every hand: with
+    benchmarks/retarget_speed_quality.py (7 hands × 20 pairs, the wrist offset on) 0.05 for
+    every hand costs Shadow 10.29 → 10.65 mm keypoint error and Inspire 25 → 15 % strict
+    success (0.1: Inspire 35 → 20 % without the offset)."""
+    use_wrist_offset: bool = True
     """Aim the wrist at the human wrist pose composed with the hand's calibrated
     ``HandModel.wrist_offset`` (``retarget calibrate-wrist``), where its fingers match the
-    human's, instead of at the human wrist pose itself. Off by default for now: on the
-    benchmark's suite it lowers the keypoint error (16.8 → 15.8 mm over six hands) at three
-    points of strict success, and it turns Allegro's hold of the heavy built-in cube with
-    ``--forces`` (cube2H/tripod, 1.3 cm largest object error) into a drop (12.1 cm). See
-    ``retarget.calibration``."""
+    human's, instead of at the human wrist pose itself (hands without an offset, the Panda
+    gripper: the pose itself). benchmarks/retarget_speed_quality.py, 7 hands × 20 pairs
+    (2026-12-03), off → on: keypoint error 19.54 → 18.58 mm (Inspire 20.08 → 17.71, Ability
+    15.52 → 14.10, SVH 16.48 → 15.05, Allegro 19.27 → 18.39), strict re-sim success 40 → 39 %
+    (Allegro 25 → 35 %, LEAP 65 → 50 %, Inspire 35 → 25 %, Ability 30 → 40 %); force matching
+    (variant (d) of benchmarks/force_preservation.py on its 27 reproduced human simulations)
+    five-finger 46.3 → 46.3 %. Allegro's hold of the heavy cube with ``--forces`` needs its
+    joint limit margin with it (see ``joint_limit_margin``). See ``retarget.calibration``."""
     use_contacts: bool = True
     use_collision: bool = True
     penetration_margin: float = 0.001
@@ -334,11 +337,13 @@ class RetargetConfig:
             "self_collision_margin",
             "table_clearance",
             "contact_ramp_s",
-            "joint_limit_margin",
         ):
             v = getattr(self, k)
             if not (np.isfinite(v) and v >= 0):
                 raise RetargetError(f"{k} must be finite and >= 0 [m], got {v}")
+        jlm = self.joint_limit_margin
+        if jlm is not None and not (np.isfinite(jlm) and jlm >= 0):
+            raise RetargetError(f"joint_limit_margin must be None or finite and >= 0, got {jlm}")
         if self.contacts_from not in ("geometry", "records"):
             raise RetargetError(
                 f"unknown contacts_from {self.contacts_from!r}; use geometry or records"
@@ -530,7 +535,8 @@ class Retargeter:
         # The kinematic solution keeps the finger joints joint_limit_margin inside their ranges
         # (at most a quarter of a range); the servo commands (the grip's squeeze) keep the whole
         # range, so a finger resting near a limit can still press.
-        inner = np.minimum(c.joint_limit_margin, 0.25 * (upper - lower))
+        margin = hand.joint_limit_margin if c.joint_limit_margin is None else c.joint_limit_margin
+        inner = np.minimum(margin, 0.25 * (upper - lower))
         inner[:6] = 0.0  # the wrist's coordinates
         self._solve_lower, self._solve_upper = lower + inner, upper - inner
         limited = m.jnt_limited[: self.nq].astype(bool)
@@ -1319,7 +1325,13 @@ class _MinkSolver:
         # on the scene is the one mink's collision limit sees.
         self.configuration.data = rt.scene.data
         self.kin = rt.kin
-        self.limits = [mink.ConfigurationLimit(m, gain=1.0)]
+        cl = mink.ConfigurationLimit(m, gain=1.0)
+        # The kinematic solution's ranges (inside by the joint limit margin), as on the
+        # Pinocchio backend: the hand's joints are the scene's first qpos entries.
+        lim = m.jnt_limited[: rt.nq].astype(bool)
+        cl.lower[: rt.nq][lim] = rt._solve_lower[lim]
+        cl.upper[: rt.nq][lim] = rt._solve_upper[lim]
+        self.limits = [cl]
         if rt.collision is not None:
             # Our hand–object rows, as on the Pinocchio backend: per-pair margins (the table's
             # clearance, the clearance of links the human keeps off the object) and the further

@@ -61,8 +61,8 @@ def test_calibrated_hands_have_offsets_the_gripper_none():
 def test_targets_follow_the_offset_and_the_switch_turns_it_off():
     traj = next(t for t in example_trajectories(seed=0) if t.scene == "cube2").slice(100, 130)
     hand = dataclasses.replace(get_hand("shadow"), wrist_offset=KNOWN)
-    on = Retargeter(hand, None, RetargetConfig(use_wrist_offset=True))
-    off = Retargeter(hand, None, RetargetConfig())  # off by default
+    on = Retargeter(hand, None, RetargetConfig())  # on by default
+    off = Retargeter(hand, None, RetargetConfig(use_wrist_offset=False))
     t_on, t_off = on.human_targets(traj), off.human_targets(traj)
     R_h = aa_to_matrix(traj.hand.global_rot_aa.astype(np.float64))
     np.testing.assert_allclose(t_off["wrist_R"], R_h)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -14,7 +15,7 @@ from dexcanvas_core.io import write_dataset
 from dexcanvas_core.rotations import aa_to_matrix
 from dexcanvas_core.trajectory import Trajectory
 from retarget.cli import main
-from retarget.errors import RetargetError
+from retarget.errors import HandModelError, RetargetError
 from retarget.hands import get_hand
 from retarget.kinematics import MujocoKinematics, PinocchioKinematics
 from retarget.retargeter import RetargetConfig, Retargeter
@@ -519,6 +520,32 @@ def test_joint_limit_margin_keeps_finger_joints_inside_their_ranges():
         RetargetConfig(joint_limit_margin=-0.1).validate()
 
 
+def test_joint_limit_margin_defaults_to_the_hands_own():
+    """``RetargetConfig.joint_limit_margin=None`` (the default) takes the hand's
+    ``HandModel.joint_limit_margin`` (Allegro 0.05 rad, the others 0); a number overrides it;
+    the mink backend's configuration limit gets the same ranges."""
+    geom = object_geometry("cube2")
+    allegro, shadow = get_hand("allegro"), get_hand("shadow")
+    assert allegro.joint_limit_margin == 0.05 and shadow.joint_limit_margin == 0.0
+    for hand, want in ((allegro, 0.05), (shadow, 0.0)):
+        rt = Retargeter(hand, geom)
+        fingers = np.zeros(rt.nq, bool)
+        fingers[6:] = np.isfinite(rt.lower[6:]) & np.isfinite(rt.upper[6:])
+        inner = np.minimum(want, 0.25 * (rt.upper - rt.lower))
+        np.testing.assert_allclose(rt._solve_lower[fingers], (rt.lower + inner)[fingers])
+        np.testing.assert_allclose(rt._solve_upper[fingers], (rt.upper - inner)[fingers])
+        np.testing.assert_array_equal(rt._solve_lower[:6], rt.lower[:6])
+    zero = Retargeter(allegro, geom, RetargetConfig(joint_limit_margin=0.0))
+    np.testing.assert_array_equal(zero._solve_lower, zero.lower)
+    mk = Retargeter(allegro, geom, RetargetConfig(backend="mink"))
+    cl = mk._mink.limits[0]
+    lim = mk.scene.model.jnt_limited[: mk.nq].astype(bool)
+    np.testing.assert_allclose(cl.lower[: mk.nq][lim], mk._solve_lower[lim])
+    np.testing.assert_allclose(cl.upper[: mk.nq][lim], mk._solve_upper[lim])
+    with pytest.raises(HandModelError, match="joint_limit_margin"):
+        dataclasses.replace(allegro, joint_limit_margin=-0.1)
+
+
 def test_contact_parts_are_validated():
     rt = Retargeter(get_hand("allegro"), object_geometry("cube2"))
     F = len(rt.tip_sites)
@@ -612,7 +639,9 @@ def test_surface_scaling_keeps_touching_keypoints_touching():
     # Uniform scaling pushed the touching keypoints (s − 1)·r off: farther than this.
     assert (d_u[touch] - d_out[touch]).mean() > 0.005
     tg = rt.human_targets(demo)  # the wrist, keypoint and vector targets are these points
-    np.testing.assert_allclose(tg["wrist_p"], out[:, 0])
+    assert rt.cfg.use_wrist_offset  # the wrist target: the scaled wrist, then the offset
+    R_h = aa_to_matrix(demo.hand.global_rot_aa.astype(np.float64))
+    np.testing.assert_allclose(tg["wrist_p"], rt.hand.wrist_offset.apply(R_h, out[:, 0])[1])
     np.testing.assert_allclose(tg["keypoints"], out[:, rt.kp_index])
     a, b = rt.vec_human[0]
     np.testing.assert_allclose(tg["vectors"][:, 0], out[:, a] - out[:, b])

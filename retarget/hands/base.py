@@ -306,6 +306,10 @@ class HandModel:
     wrist_gains: WristGains = WristGains()
     wrist_offset: WristOffset | None = None
     """The wrist target's offset from the human wrist (:class:`WristOffset`); None: none."""
+    joint_limit_margin: float = 0.0
+    """How far [rad or m] the retargeting's kinematic solution keeps this hand's finger joints
+    inside their ranges unless ``RetargetConfig.joint_limit_margin`` says otherwise (for a hand
+    whose fingers press badly from a limit; see there)."""
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -324,6 +328,8 @@ class HandModel:
             if kp not in joints:
                 bad(f"joint_sites key {kp!r} is not a MANO21 joint keypoint ({sorted(joints)})")
             self._joint_site_name(kp)  # raises for an unmapped finger
+        if not (np.isfinite(self.joint_limit_margin) and self.joint_limit_margin >= 0):
+            bad(f"joint_limit_margin must be finite and >= 0, got {self.joint_limit_margin}")
         names = [a.joint for a in self.actuators]
         if len(set(names)) != len(names):
             bad("two actuators on the same joint")
