@@ -134,7 +134,7 @@ class RetargetConfig:
     but the heavy cube of ``retarget run --hand allegro --pair cube2H/tripod --forces`` drops
     (9.5 cm). With ``joint_limit_margin`` 0.1 as well: 18.82 mm, 10.17 mm, 39 %, force matching
     48.1 % (LEAP 66.7 → 74.1 %), the heavy cube held (0.97 cm); the wrist offset
-    (``use_wrist_offset``) was taken instead (18.58 mm, 10.36 mm, 39 %; with it 0.05 drops the
+    (``use_wrist_offset``) was taken instead (18.61 mm, 10.47 mm, 39 %; with it 0.05 drops the
     heavy cube again, 11.1 cm, even with a 0.1 rad joint limit margin)."""
     w_tips: float = 1.0
     w_joints: float = 1.0
@@ -169,15 +169,16 @@ class RetargetConfig:
     the calibrated wrist offset it dropped, 12.1 cm; with the offset and 0.05 rad, Allegro's
     default, it is held: 1.06 cm). Not a margin for every hand: with
     benchmarks/retarget_speed_quality.py (7 hands × 20 pairs, the wrist offset on) 0.05 for
-    every hand costs Shadow 10.29 → 10.65 mm keypoint error and Inspire 25 → 15 % strict
+    every hand costs Shadow 10.31 → 10.68 mm keypoint error and Inspire 25 → 15 % strict
     success (0.1: Inspire 35 → 20 % without the offset)."""
     use_wrist_offset: bool = True
     """Aim the wrist at the human wrist pose composed with the hand's calibrated
     ``HandModel.wrist_offset`` (``retarget calibrate-wrist``), where its fingers match the
     human's, instead of at the human wrist pose itself (hands without an offset, the Panda
     gripper: the pose itself). benchmarks/retarget_speed_quality.py, 7 hands × 20 pairs
-    (2026-12-03), off → on: keypoint error 19.54 → 18.58 mm (Inspire 20.08 → 17.71, Ability
-    15.52 → 14.10, SVH 16.48 → 15.05, Allegro 19.27 → 18.39), strict re-sim success 40 → 39 %
+    (2026-12-03), off → on (Allegro with its joint limit margin): keypoint error 19.54 → 18.61
+    mm (Inspire 20.15 → 17.76, Ability 15.62 → 14.19, SVH 16.49 → 15.05, Allegro 19.31 →
+    18.64; seed 1, all 7: 19.07 → 18.15), strict re-sim success 40 → 39 % (seed 1: 35 → 36 %)
     (Allegro 25 → 35 %, LEAP 65 → 50 %, Inspire 35 → 25 %, Ability 30 → 40 %); force matching
     (variant (d) of benchmarks/force_preservation.py on its 27 reproduced human simulations)
     five-finger 46.3 → 46.3 %. Allegro's hold of the heavy cube with ``--forces`` needs its
