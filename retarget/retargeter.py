@@ -498,7 +498,8 @@ class Retargeter:
         c = self.cfg
         is_tip = np.array([k.endswith("_tip") for k in self.kp_names])
         self.keypoints = KeypointObjective(self.kp_sites, np.where(is_tip, c.w_tips, c.w_joints))
-        self.wrist = WristPoseObjective(WRIST_SITE, (c.w_wrist_pos, c.w_wrist_rot))
+        ww = hand.wrist_weight  # the hand's factor on the wrist weights
+        self.wrist = WristPoseObjective(WRIST_SITE, (ww * c.w_wrist_pos, ww * c.w_wrist_rot))
         thumb_site = self.tip_sites[0] if tip_human and tip_human[0] == "thumb" else None
         pairs = [(s, thumb_site) for s in self.tip_sites[1:]] if thumb_site else []
         # A gripper's two "fingers" both take several human fingers: no vectors among them.
@@ -1134,7 +1135,9 @@ class Retargeter:
         return self._within_limits(q + dq) - q
 
     def _objectives(self):
-        objs = [self.wrist, self.keypoints, self.posture, self.smooth]
+        objs = [self.keypoints, self.posture, self.smooth]
+        if any(self.wrist.weight):  # (a hand with wrist_weight 0: no wrist term to build)
+            objs.insert(0, self.wrist)
         if self.vec_human:
             objs.append(self.vectors)
         if self.cfg.use_contacts and self.contacts is not None:

@@ -354,6 +354,9 @@ def test_cli_hands_table_and_json(capsys):
     shadow = next(r for r in rows if r["name"] == "shadow")
     assert shadow["dof_fingers"] == 24 and shadow["actuators_fingers"] == 20
     assert shadow["source"] == "gymnasium-robotics" and shadow["licence"]
+    assert shadow["wrist_offset"] and shadow["wrist_weight"] == 1.0
+    panda = next(r for r in rows if r["name"] == "panda")
+    assert not panda["wrist_offset"] and panda["wrist_weight"] == 0.0
 
 
 def test_cli_errors_are_one_line_with_exit_2(capsys):

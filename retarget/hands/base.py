@@ -310,6 +310,12 @@ class HandModel:
     """How far [rad or m] the retargeting's kinematic solution keeps this hand's finger joints
     inside their ranges unless ``RetargetConfig.joint_limit_margin`` says otherwise (for a hand
     whose fingers press badly from a limit; see there)."""
+    wrist_weight: float = 1.0
+    """Factor on the retargeting's wrist-pose weights (``RetargetConfig.w_wrist_pos`` and
+    ``w_wrist_rot``) for this hand; 0: the wrist is placed by the fingertips, the contacts and
+    the smoothness term alone. For a hand whose wrist the human wrist pose places badly even
+    with its calibrated offset (the Panda gripper has none: no one offset describes it;
+    ``retarget calibrate-wrist``)."""
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -330,6 +336,8 @@ class HandModel:
             self._joint_site_name(kp)  # raises for an unmapped finger
         if not (np.isfinite(self.joint_limit_margin) and self.joint_limit_margin >= 0):
             bad(f"joint_limit_margin must be finite and >= 0, got {self.joint_limit_margin}")
+        if not (np.isfinite(self.wrist_weight) and self.wrist_weight >= 0):
+            bad(f"wrist_weight must be finite and >= 0, got {self.wrist_weight}")
         names = [a.joint for a in self.actuators]
         if len(set(names)) != len(names):
             bad("two actuators on the same joint")
@@ -765,6 +773,10 @@ class HandModel:
             "fingers": {f: self.fingers.get(f) for f in HUMAN_FINGERS},
             "tip_sites": self.tip_site_names,
             "scale": round(self.scale, 3),
+            # The retargeting's per-hand settings (see their fields).
+            "wrist_offset": self.wrist_offset is not None,
+            "wrist_weight": round(self.wrist_weight, 4),
+            "joint_limit_margin": self.joint_limit_margin,
             "source": self.source.short,
             "source_kind": self.source.kind,
             "location": self.source.location,
