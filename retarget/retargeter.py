@@ -127,6 +127,8 @@ class RetargetConfig:
     w_wrist_rot: float = 0.15
     """Weight of the wrist's rotation error [per rad²]; the keypoint error's main lever (a
     radian weighed like a metre holds every fingertip off by the human wrist's orientation).
+    Both wrist weights are multiplied by the hand's ``HandModel.wrist_weight`` (0 on Panda and
+    SVH, 1/3 on Ability and Inspire, 1 on the others).
     benchmarks/retarget_speed_quality.py, all 7 hands × 20 pairs (2026-12-03), 0.15 → 0.05:
     keypoint error 19.54 → 18.21 mm, contact-point error 11.05 → 9.76 mm, strict re-sim
     success 40 → 40 %, force matching's five-finger strict success (variant (d) of

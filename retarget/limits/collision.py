@@ -20,7 +20,11 @@ Two ways to find the pairs within ``distmax``, with the same result:
   pass MuJoCo's contact filters and margins of at least ``distmax``, which
   :class:`CollisionLimit` checks. Box–box and mesh pairs are not the same (``mj_collision``'s
   multi-contact routines report depths up to millimetres off the Euclidean distance that
-  ``mj_geomDistance`` computes), so they keep the per-pair path.
+  ``mj_geomDistance`` computes), so they keep the per-pair path. Mesh pairs come closer but
+  not close enough (SVH, Ability and Panda on the example cube2, 60 frames of random finger
+  poses, MuJoCo 4.0.1: every pair found, distances within 0.32 mm, but the directions differ
+  by up to 10° at 3 mm or more apart and 27° when penetrating), though the per-pair path is
+  SVH's largest collision cost (cProfile, one 724-frame retarget: 0.63 of 3.8 s).
 """
 
 from __future__ import annotations
