@@ -69,6 +69,17 @@ on ``--workers`` spawned processes, one thread each::
     python benchmarks/force_preservation.py                      # 20 pairs, every hand, MPC
     python benchmarks/force_preservation.py --hands allegro --n-pairs 2 \\
         --human-tracker open_loop --workers 1 --out /tmp/fp7.json   # smoke run
+
+Ablations of the retargeting: ``--variants`` runs a subset (the others' rows are marked
+skipped; (e) brings (d)), ``--set NAME=VALUE`` changes a ``RetargetConfig`` field of our
+variants (each variant's defining fields win), and ``--human-cache DIR`` stores each human
+simulation (pickle, written atomically) keyed by the demonstration's data, the object, the
+tracker's ``SimConfig`` and the force pipeline's source (``dexcanvas_core.sim``, ``.mano``), so
+a second run reads them back instead of spending the force pipeline's ~8 minutes again::
+
+    python benchmarks/force_preservation.py --hands shadow ability inspire svh leap \\
+        --variants d --human-cache ~/.cache/dexcanvas-retarget/human-sims \\
+        --set contact_tangent_weight=0.2 --out /tmp/ablation.json
 """
 
 from __future__ import annotations
@@ -84,7 +95,7 @@ import sys
 import time
 import traceback
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
 from types import SimpleNamespace
@@ -92,7 +103,9 @@ from types import SimpleNamespace
 import numpy as np
 from _common import (
     atomic_write_json,
+    config_overrides,
     load_demonstrations,
+    parse_override,
     progress_bar,
     resim_result,
     versions,
@@ -100,6 +113,7 @@ from _common import (
 from force_pipeline import _init_worker, _one_thread_env
 
 DEFAULT_OUT = Path(__file__).parent / "results" / "force_preservation.json"
+NOT_REQUESTED = "not requested (--variants)"
 TRACKERS = ("mpc", "open_loop")
 VERSION_DISTS = (
     "dexcanvas-retarget",
@@ -161,6 +175,15 @@ class BenchConfig:
     seed: int = 0
     dex_wrist: str = "free"
     """dex-retargeting's wrist: ``free`` (optimised) or ``fixed`` (the human wrist pose)."""
+    variants: tuple[str, ...] = ("a", "b", "c", "d", "e")
+    """Variants to run; the others' rows are marked skipped ("not requested"). (e) refines
+    (d)'s output, so asking for (e) runs (d) too."""
+    overrides: dict = field(default_factory=dict)
+    """``RetargetConfig`` fields changed for our variants (b)–(e) (``--set NAME=VALUE``); each
+    variant's defining fields win (b: no contacts, no squeeze; d: force matching)."""
+    human_cache: Path | None = None
+    """Directory of cached human simulations (``--human-cache``): a (demonstration, object,
+    tracker) simulated once is read back on later runs instead of simulated again."""
 
     def validate(self) -> BenchConfig:
         from retarget.hands import available_hands
@@ -177,6 +200,12 @@ class BenchConfig:
             raise SystemExit(f"--workers must be >= 1, got {self.workers}")
         if self.dex_wrist not in ("free", "fixed"):
             raise SystemExit(f"--dex-wrist must be free or fixed, got {self.dex_wrist!r}")
+        bad_v = [v for v in self.variants if v not in RUN_VARIANTS]
+        if bad_v or not self.variants:
+            raise SystemExit(
+                f"--variants: unknown or none {', '.join(bad_v)}; choose from "
+                f"{' '.join(RUN_VARIANTS)}"
+            )
         bad = [h for h in self.hands or () if h not in available_hands()]
         if bad:
             raise SystemExit(
@@ -186,6 +215,11 @@ class BenchConfig:
 
     def plot_path(self) -> Path:
         return Path(self.plot) if self.plot is not None else Path(self.out).with_suffix(".png")
+
+    def computed_variants(self) -> tuple[str, ...]:
+        """The requested variants plus what they need: (e) needs (d)."""
+        want = set(self.variants) | ({"d"} if "e" in self.variants else set())
+        return tuple(v for v in RUN_VARIANTS if v in want)
 
 
 def is_five_finger(hand) -> bool:
@@ -272,8 +306,11 @@ def _hand_job(args) -> list[dict]:
     from retarget.run import FORCE_CONTACT_TIMECONST
     from retarget.validate import Resimulator, ValidateConfig
 
-    base, traj, human, dex_wrist = args
+    base, traj, human, dex_wrist, computed, overrides = args
     rows = {v: {**base, "variant": v} for v in RUN_VARIANTS}
+    for v in RUN_VARIANTS:
+        if v not in computed:
+            rows[v]["skipped"] = NOT_REQUESTED
     sims: dict[str, object] = {}
     retargeters: dict[str, object] = {}
     robot_d = None
@@ -285,12 +322,14 @@ def _hand_job(args) -> list[dict]:
             r.update(mass_kg=geom.mass_kg, weight_n=weight_n)
         resim_soft = Resimulator(hand, geom)
         configs = {
-            "b": RetargetConfig(use_contacts=False, squeeze_depth=0.0),
-            "c": RetargetConfig(),
-            "d": RetargetConfig(force_matching=True),
+            "b": RetargetConfig(**{**overrides, "use_contacts": False, "squeeze_depth": 0.0}),
+            "c": RetargetConfig(**overrides),
+            "d": RetargetConfig(**{**overrides, "force_matching": True}),
         }
         for v in ("b", "c", "d"):
             row = rows[v]
+            if v not in computed:
+                continue
             if v == "d" and human is None:
                 row["skipped"] = "the force pipeline did not reproduce the demonstration"
                 continue
@@ -318,64 +357,66 @@ def _hand_job(args) -> list[dict]:
             row["wall_s"] = time.perf_counter() - t0
         # (a) on (b)'s targets, measured with (b)'s retargeter (same hand, same definitions)
         row = rows["a"]
-        t0 = time.perf_counter()
-        try:
-            rt_b = retargeters.get("b") or Retargeter(hand, geom, configs["b"])
-            tg = rt_b.human_targets(traj)
-            baseline = _baseline(hand.name, dex_wrist)
-            if rt_b.kp_sites != baseline.keypoint_sites:
-                raise RuntimeError(f"{hand.name}: baseline keypoint sites differ from ours")
-            dex = baseline.retarget_targets(tg["keypoints"], tg["wrist_p"], tg["wrist_R"])
-            m, sims["a"] = resim_result(resim_soft, dex.q, traj)
-            row.update(
-                ms_per_frame=dex.ms_per_frame,
-                solver_failures=dex.solver_failures,
-                **measure_trajectory(rt_b, traj, dex.q, tg).summary(),
-                **m,
-            )
-        except Exception as e:
-            row.update(_error(e))
-        row["wall_s"] = time.perf_counter() - t0
-        # (e) (d) + physics refinement where (d)'s replay fails
-        row = rows["e"]
-        if "skipped" in rows["d"] or "error" in rows["d"] or robot_d is None:
-            row["skipped"] = rows["d"].get("skipped") or "variant (d) failed"
-        elif rows["d"]["success"]:
-            keep = ("success", "success_loose", "object_pos_err_max_m", "object_pos_err_mean_m",
-                    "object_rot_err_mean_rad", "ms_per_frame", "keypoint_err_mean_m",
-                    "penetration_max_m")  # fmt: skip
-            row.update({k: rows["d"][k] for k in keep if k in rows["d"]})
-            row.update(refined=False, finger_ctrl_deviation_mean_rad=0.0,
-                       wrist_pos_deviation_mean_m=0.0)  # fmt: skip
-        else:
-            from retarget.refine import RefineConfig, refine
-
+        if "a" in computed:
             t0 = time.perf_counter()
             try:
-                rf = refine(hand, geom, human, robot_d, retargeters["d"].tip_sites,
-                            RefineConfig(contact_timeconst=FORCE_CONTACT_TIMECONST))  # fmt: skip
-                rm = rf.metrics()
+                rt_b = retargeters.get("b") or Retargeter(hand, geom, configs["b"])
+                tg = rt_b.human_targets(traj)
+                baseline = _baseline(hand.name, dex_wrist)
+                if rt_b.kp_sites != baseline.keypoint_sites:
+                    raise RuntimeError(f"{hand.name}: baseline keypoint sites differ from ours")
+                dex = baseline.retarget_targets(tg["keypoints"], tg["wrist_p"], tg["wrist_R"])
+                m, sims["a"] = resim_result(resim_soft, dex.q, traj)
                 row.update(
-                    success=rm["success"],
-                    success_loose=bool(
-                        rm["frames_tracked"] == human.num_frames
-                        and rm["object_pos_err_mean_m"] < 0.10
-                        and rm["object_rot_err_mean_rad"] < 0.5
-                    ),
-                    object_pos_err_max_m=rm["object_pos_err_max_m"],
-                    object_pos_err_mean_m=rm["object_pos_err_mean_m"],
-                    object_rot_err_mean_rad=rm["object_rot_err_mean_rad"],
-                    ms_per_frame=rows["d"]["ms_per_frame"],
-                    keypoint_err_mean_m=rows["d"].get("keypoint_err_mean_m"),
-                    penetration_max_m=rows["d"].get("penetration_max_m"),
-                    refined=True,
-                    refine_s=rm["compute_s"],
-                    finger_ctrl_deviation_mean_rad=rm["finger_ctrl_deviation_mean_rad"],
-                    wrist_pos_deviation_mean_m=rm["wrist_pos_deviation_mean_m"],
+                    ms_per_frame=dex.ms_per_frame,
+                    solver_failures=dex.solver_failures,
+                    **measure_trajectory(rt_b, traj, dex.q, tg).summary(),
+                    **m,
                 )
             except Exception as e:
                 row.update(_error(e))
             row["wall_s"] = time.perf_counter() - t0
+        # (e) (d) + physics refinement where (d)'s replay fails
+        row = rows["e"]
+        if "e" in computed:
+            if "skipped" in rows["d"] or "error" in rows["d"] or robot_d is None:
+                row["skipped"] = rows["d"].get("skipped") or "variant (d) failed"
+            elif rows["d"]["success"]:
+                keep = ("success", "success_loose", "object_pos_err_max_m", "object_pos_err_mean_m",
+                        "object_rot_err_mean_rad", "ms_per_frame", "keypoint_err_mean_m",
+                        "penetration_max_m")  # fmt: skip
+                row.update({k: rows["d"][k] for k in keep if k in rows["d"]})
+                row.update(refined=False, finger_ctrl_deviation_mean_rad=0.0,
+                           wrist_pos_deviation_mean_m=0.0)  # fmt: skip
+            else:
+                from retarget.refine import RefineConfig, refine
+
+                t0 = time.perf_counter()
+                try:
+                    rcfg = RefineConfig(contact_timeconst=FORCE_CONTACT_TIMECONST)
+                    rf = refine(hand, geom, human, robot_d, retargeters["d"].tip_sites, rcfg)
+                    rm = rf.metrics()
+                    row.update(
+                        success=rm["success"],
+                        success_loose=bool(
+                            rm["frames_tracked"] == human.num_frames
+                            and rm["object_pos_err_mean_m"] < 0.10
+                            and rm["object_rot_err_mean_rad"] < 0.5
+                        ),
+                        object_pos_err_max_m=rm["object_pos_err_max_m"],
+                        object_pos_err_mean_m=rm["object_pos_err_mean_m"],
+                        object_rot_err_mean_rad=rm["object_rot_err_mean_rad"],
+                        ms_per_frame=rows["d"]["ms_per_frame"],
+                        keypoint_err_mean_m=rows["d"].get("keypoint_err_mean_m"),
+                        penetration_max_m=rows["d"].get("penetration_max_m"),
+                        refined=True,
+                        refine_s=rm["compute_s"],
+                        finger_ctrl_deviation_mean_rad=rm["finger_ctrl_deviation_mean_rad"],
+                        wrist_pos_deviation_mean_m=rm["wrist_pos_deviation_mean_m"],
+                    )
+                except Exception as e:
+                    row.update(_error(e))
+                row["wall_s"] = time.perf_counter() - t0
         # force columns: every re-simulated variant against the human's forces
         if robot_d is not None:
             for v, sim_res in sims.items():
@@ -814,6 +855,75 @@ def plot_success(per_hand: dict, scope_aggs: dict, path: Path) -> Path:
 
 
 # --------------------------------------------------------------------------------------- main
+# ------------------------------------------------------------------------ human-sim cache
+def _sim_sources_digest() -> str:
+    """Digest of the force pipeline's source (``dexcanvas_core.sim``, ``.mano``): a cached
+    human simulation is only reused by the code that made it."""
+    import hashlib
+
+    import dexcanvas_core
+
+    root = Path(dexcanvas_core.__file__).parent
+    h = hashlib.sha256()
+    for sub in ("sim", "mano"):
+        for f in sorted((root / sub).rglob("*.py")):
+            h.update(f.relative_to(root).as_posix().encode())
+            h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def human_cache_key(traj, object_id: str, tracker: str) -> str:
+    """File stem of one human simulation in the cache: the demonstration's data, the object,
+    the tracker's configuration and the force pipeline's source."""
+    import hashlib
+
+    from dexcanvas_core.sim.pipeline import SimConfig
+
+    h = hashlib.sha256()
+    h.update(repr(SimConfig(tracker=tracker, object_id=object_id)).encode())
+    h.update(_sim_sources_digest().encode())
+    h.update(str(traj.uuid).encode())
+    hand, obj = traj.hand, traj.object
+    arrays = (traj.timestamp, hand.global_pos, hand.global_rot_aa, hand.finger_pose, hand.betas,
+              obj.pos, obj.rot_aa)  # fmt: skip
+    for a in arrays:
+        h.update(np.ascontiguousarray(a).tobytes())
+    return f"{object_id}-{tracker}-{h.hexdigest()[:24]}"
+
+
+def load_human_sim(cache_dir: Path, key: str, console=None) -> dict | None:
+    """The cached ``_human_sim`` result ``key``, or ``None`` (absent, or unreadable: said on the
+    console and simulated again)."""
+    import pickle
+
+    path = Path(cache_dir) / f"{key}.pkl"
+    if not path.is_file():
+        return None
+    try:
+        with open(path, "rb") as fh:
+            res = pickle.load(fh)
+        if not (isinstance(res, dict) and "record" in res and "trajectory" in res):
+            raise ValueError("not a human simulation record")
+    except Exception as e:  # a truncated or foreign file: simulate again, overwrite it
+        if console is not None:
+            console.print(f"[yellow]human cache: {path.name} unreadable ({e}); simulating again")
+        return None
+    return {**res, "record": {**res["record"], "cached": True}}
+
+
+def store_human_sim(cache_dir: Path, key: str, res: dict) -> None:
+    """Write ``res`` to the cache atomically (temporary file, then rename)."""
+    import pickle
+
+    cache_dir = Path(cache_dir)
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    path = cache_dir / f"{key}.pkl"
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(tmp, "wb") as fh:
+        pickle.dump({"record": res["record"], "trajectory": res["trajectory"]}, fh)
+    os.replace(tmp, path)
+
+
 def run_jobs(cfg: BenchConfig, demos: list, plans: list, hands: list, console):
     """Every (pair, object) through the force pipeline, and as soon as one is done, its hand
     jobs, over ``cfg.workers`` spawned one-thread processes. Returns ``(human_records, rows,
@@ -843,39 +953,56 @@ def run_jobs(cfg: BenchConfig, demos: list, plans: list, hands: list, console):
     ):
         task = prog.add_task("human force pipeline", total=total)
         pending = {}
+        keys = {}
+        computed = cfg.computed_variants()
+
+        def on_human(i: int, k: int, res: dict) -> None:
+            """A human simulation is done (or read from the cache): its hand jobs."""
+            pair, traj = demos[i]
+            obj = plans[i][k]
+            prog.update(task, description=f"human force pipeline · {pair} · {obj['object_id']}")
+            human.append({"index": i, "pair": str(pair), **obj, **res["record"]})
+            for hand in performable[i]:
+                base = {
+                    "hand": hand.name,
+                    "index": i,
+                    "pair": str(pair),
+                    "group": pair.manipulation_type.group,
+                    "manipulation_type": pair.manipulation_type.name,
+                    **obj,
+                    "frames": traj.num_frames,
+                    "uuid": traj.uuid,
+                    "human_forces": res["trajectory"] is not None,
+                }
+                job = (base, traj, res["trajectory"], cfg.dex_wrist, computed, cfg.overrides)
+                pending[pool.submit(_hand_job, job)] = ("hand", i, k)
+
         for i, (_, traj) in enumerate(demos):
             for k, obj in enumerate(plans[i]):
+                if cfg.human_cache is not None:
+                    keys[i, k] = human_cache_key(traj, obj["object_id"], cfg.human_tracker)
+                    res = load_human_sim(cfg.human_cache, keys[i, k], console)
+                    if res is not None:
+                        prog.advance(task)
+                        on_human(i, k, res)
+                        continue
                 job = ((i, k), traj, obj["object_id"], cfg.human_tracker)
                 pending[pool.submit(_human_sim, job)] = ("human", i, k)
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for fut in done:
                 kind, i, k = pending.pop(fut)
-                pair, traj = demos[i]
-                obj = plans[i][k]
+                pair, _ = demos[i]
                 prog.advance(task)
                 if kind == "hand":
                     rows.extend(fut.result())
+                    obj = plans[i][k]
                     prog.update(task, description=f"retargeting · {pair} · {obj['object_id']}")
                     continue
                 res = fut.result()
-                prog.update(task, description=f"human force pipeline · {pair} · {obj['object_id']}")
-                rec = {"index": i, "pair": str(pair), **obj, **res["record"]}
-                human.append(rec)
-                for hand in performable[i]:
-                    base = {
-                        "hand": hand.name,
-                        "index": i,
-                        "pair": str(pair),
-                        "group": pair.manipulation_type.group,
-                        "manipulation_type": pair.manipulation_type.name,
-                        **obj,
-                        "frames": traj.num_frames,
-                        "uuid": traj.uuid,
-                        "human_forces": res["trajectory"] is not None,
-                    }
-                    job = (base, traj, res["trajectory"], cfg.dex_wrist)
-                    pending[pool.submit(_hand_job, job)] = ("hand", i, k)
+                if cfg.human_cache is not None:
+                    store_human_sim(cfg.human_cache, keys[i, k], res)
+                on_human(i, k, res)
     human.sort(key=lambda r: (r["index"], r["object_variant"] == "heavy"))
     return human, rows, skipped
 
@@ -905,6 +1032,9 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         f"{len(demos)} pairs from {source} ({', '.join(f'{g} {n}' for g, n in groups.items())})"
         f" + {n_heavy} heavy version(s); hands: {', '.join(h.name for h in hands)}; human "
         f"tracker {cfg.human_tracker}; {cfg.workers} worker(s)"
+        + (f"; variants {' '.join(cfg.variants)}" if cfg.variants != RUN_VARIANTS else "")
+        + (f"; RetargetConfig {cfg.overrides}" if cfg.overrides else "")
+        + (f"; human cache {cfg.human_cache}" if cfg.human_cache is not None else "")
     )
 
     human, rows, skipped = run_jobs(cfg, demos, plans, hands, console)
@@ -961,7 +1091,12 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
     doc = {
         "benchmark": "force_preservation",
         "command": " ".join(["python benchmarks/force_preservation.py", *sys.argv[1:]]),
-        "config": {**dataclasses.asdict(cfg), "out": str(cfg.out), "plot": str(plot)},
+        "config": {
+            **dataclasses.asdict(cfg),
+            "out": str(cfg.out),
+            "plot": str(plot),
+            "human_cache": None if cfg.human_cache is None else str(cfg.human_cache),
+        },
         "human_sim_config": SimConfig(tracker=cfg.human_tracker).as_dict(),
         "variants": {
             v: {"label": LABELS[v], "implemented": v not in NOT_IMPLEMENTED} for v in VARIANTS
@@ -1072,7 +1207,35 @@ def main(argv: list[str] | None = None) -> int:
         default="free",
         help="dex-retargeting's wrist: optimised (free) or the human wrist pose",
     )
+    ap.add_argument(
+        "--variants",
+        nargs="+",
+        choices=RUN_VARIANTS,
+        default=list(RUN_VARIANTS),
+        help="variants to run (default: all; e also runs d)",
+    )
+    ap.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        type=parse_override,
+        default=[],
+        metavar="NAME=VALUE",
+        help="change a RetargetConfig field of our variants (repeatable), e.g. --set "
+        "w_contacts=100",
+    )
+    ap.add_argument(
+        "--human-cache",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="reuse human simulations stored here (written on first use): ablations of the "
+        "retargeting skip the force pipeline",
+    )
     a = ap.parse_args(argv)
+    from retarget.retargeter import RetargetConfig
+
+    overrides = config_overrides(a.overrides, RetargetConfig)
     logging.basicConfig(level=logging.ERROR)
     cfg = BenchConfig(
         hands=tuple(dict.fromkeys(a.hands)) if a.hands else None,
@@ -1086,6 +1249,9 @@ def main(argv: list[str] | None = None) -> int:
         operator=a.operator,
         seed=a.seed,
         dex_wrist=a.dex_wrist,
+        variants=tuple(dict.fromkeys(a.variants)),
+        overrides=overrides,
+        human_cache=a.human_cache,
     )
     run_benchmark(cfg)
     return 0

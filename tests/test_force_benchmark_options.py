@@ -1,0 +1,72 @@
+"""``benchmarks/force_preservation.py``: variant selection, ``--set`` overrides and the
+human-simulation cache, on a short real demonstration."""
+
+from __future__ import annotations
+
+import copy
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+import force_preservation as fp
+
+from dexcanvas_core.example import example_trajectories
+
+
+@pytest.fixture(scope="module")
+def traj():
+    return next(t for t in example_trajectories(seed=0) if t.scene == "cube2").slice(100, 160)
+
+
+def test_cache_key_follows_the_demonstration_object_and_tracker(traj):
+    key = fp.human_cache_key(traj, "cube2", "mpc")
+    assert key == fp.human_cache_key(traj, "cube2", "mpc")  # stable
+    assert key != fp.human_cache_key(traj, "cube2h", "mpc")
+    assert key != fp.human_cache_key(traj, "cube2", "open_loop")
+    moved = copy.deepcopy(traj)
+    moved.object.pos[5, 2] += 1e-4  # a tenth of a millimetre on one frame
+    assert key != fp.human_cache_key(moved, "cube2", "mpc")
+
+
+def test_cache_round_trip_and_a_corrupt_file_is_simulated_again(tmp_path, traj):
+    res = {"record": {"success": True, "wall_s": 1.5}, "trajectory": traj}
+    fp.store_human_sim(tmp_path, "k", res)
+    assert [p.name for p in tmp_path.iterdir()] == ["k.pkl"]  # no temporary file left
+    back = fp.load_human_sim(tmp_path, "k")
+    assert back["record"] == {"success": True, "wall_s": 1.5, "cached": True}
+    np.testing.assert_array_equal(back["trajectory"].object.pos, traj.object.pos)
+    assert fp.load_human_sim(tmp_path, "absent") is None
+    (tmp_path / "k.pkl").write_bytes(b"\x80\x04truncated")
+    assert fp.load_human_sim(tmp_path, "k") is None
+
+
+def test_variant_selection_is_checked_and_refinement_brings_its_input():
+    assert fp.BenchConfig(variants=("e",)).computed_variants() == ("d", "e")
+    assert fp.BenchConfig(variants=("c", "a")).computed_variants() == ("a", "c")
+    with pytest.raises(SystemExit, match="--variants"):
+        fp.BenchConfig(variants=("x",)).validate()
+
+
+def test_set_refuses_an_unknown_retarget_field():
+    with pytest.raises(SystemExit, match="unknown RetargetConfig field"):
+        fp.main(["--set", "no_such_weight=1", "--n-pairs", "1"])
+
+
+def test_hand_job_runs_only_the_requested_variants_with_the_overrides(traj):
+    base = {"hand": "shadow", "index": 0, "pair": "cube2/tripod", "object_id": "cube2"}
+    base.update(object_variant="light", frames=traj.num_frames, human_forces=False)
+    job = (base, traj, None, "free", ("c",), {})
+    rows = {r["variant"]: r for r in fp._hand_job(job)}
+    assert set(rows) == set(fp.RUN_VARIANTS)
+    assert all(rows[v]["skipped"] == fp.NOT_REQUESTED for v in ("a", "b", "d", "e"))
+    assert "error" not in rows["c"] and "success" in rows["c"]
+    # an override reaches our retargeter: a refused value fails (c) with the config's message
+    bad = {r["variant"]: r for r in fp._hand_job((*job[:5], {"iterations": 0}))}
+    assert "iterations must be >= 1" in bad["c"]["error"]
+    # and a valid one changes the solution
+    light = {r["variant"]: r for r in fp._hand_job((*job[:5], {"w_contacts": 1.0}))}
+    assert light["c"]["contact_err_mean_m"] != rows["c"]["contact_err_mean_m"]
