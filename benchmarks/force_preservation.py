@@ -588,11 +588,13 @@ def target_checks(scope: str, rows: list[dict], agg: dict, hv: dict) -> list[dic
         for r in rows
         if r["variant"] == "d" and "skipped" not in r
     }
-    same = {
+    same = {  # (a) and (d) runs on the same (hand, pair, object); a skipped row is no run
         v: [
             r
             for r in rows
-            if r["variant"] == v and (r["hand"], r["pair"], r["object_id"]) in force_keys
+            if r["variant"] == v
+            and "skipped" not in r
+            and (r["hand"], r["pair"], r["object_id"]) in force_keys
         ]
         for v in ("a", "d")
     }

@@ -70,3 +70,24 @@ def test_hand_job_runs_only_the_requested_variants_with_the_overrides(traj):
     # and a valid one changes the solution
     light = {r["variant"]: r for r in fp._hand_job((*job[:5], {"w_contacts": 1.0}))}
     assert light["c"]["contact_err_mean_m"] != rows["c"]["contact_err_mean_m"]
+
+
+def test_targets_do_not_compare_with_a_variant_that_was_not_run():
+    rows = []
+    for i, ok in enumerate((True, False, True)):
+        key = {"hand": "shadow", "pair": f"p{i}", "object_id": "cube2", "object_variant": "light"}
+        rows.append({**key, "variant": "d", "success": ok, "frames": 10})
+        rows.append({**key, "variant": "a", "skipped": fp.NOT_REQUESTED, "frames": 10})
+    agg = fp.aggregate_variants(rows)
+    hv = fp.heavy_vs_light(rows)
+    checks = {c["target"]: c for c in fp.target_checks("five", rows, agg, hv)}
+    vs_dex = next(c for t, c in checks.items() if "(a)'s" in t)
+    assert vs_dex["met"] is None and vs_dex["value"][1] is None
+    assert agg["d"]["success_rate"] == 2 / 3
+    # with (a) run and failing everywhere, the same check is measured and met
+    for r in rows:
+        if r["variant"] == "a":
+            del r["skipped"]
+            r["success"] = False
+    checks = fp.target_checks("five", rows, fp.aggregate_variants(rows), hv)
+    assert next(c for c in checks if "(a)'s" in c["target"])["met"] is True
