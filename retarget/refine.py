@@ -63,8 +63,8 @@ class RefineConfig:
     replay fails): 0 retries rescue 17 (6.3 s per refinement), 2 retries with 1.5× samples 24
     (13.1 s); one attempt with 48 samples 22 (20.4 s), with a 0.4 s horizon and 4 knots 22
     (14.0 s), with 2× the sampling noise 13. 4 retries (2026-12-04, the 41 such runs whose
-    refinement still failed at 2): 4 more rescued, 38 s of CPU per failing refinement instead
-    of 11 s (README, force preservation)."""
+    refinement still failed at 2): 4 more rescued, 38 s of CPU per refinement on those runs
+    instead of 12 s (README, force preservation)."""
     backtrack_s: float = 0.5
     retry_samples: float = 1.5
     checkpoint_s: float = 0.1
