@@ -84,6 +84,8 @@ def test_targets_do_not_compare_with_a_variant_that_was_not_run():
     vs_dex = next(c for t, c in checks.items() if "(a)'s" in t)
     assert vs_dex["met"] is None and vs_dex["value"][1] is None
     assert agg["d"]["success_rate"] == 2 / 3
+    # (e) was not run either: its success target is not measured (not "met" nor "not met")
+    assert checks["(e) strict success ≥ 85 %"]["met"] is None
     # with (a) run and failing everywhere, the same check is measured and met
     for r in rows:
         if r["variant"] == "a":
@@ -91,3 +93,9 @@ def test_targets_do_not_compare_with_a_variant_that_was_not_run():
             r["success"] = False
     checks = fp.target_checks("five", rows, fp.aggregate_variants(rows), hv)
     assert next(c for c in checks if "(a)'s" in c["target"])["met"] is True
+    # (e) run on the same pairs, lifting all three: its success target is measured and met
+    rows += [{**r, "variant": "e", "success": True} for r in rows if r["variant"] == "d"]
+    agg = fp.aggregate_variants(rows)
+    e = next(c for c in fp.target_checks("five", rows, agg, fp.heavy_vs_light(rows))
+             if c["target"].startswith("(e) strict"))  # fmt: skip
+    assert e["met"] is True and e["value"] == 1.0 and e["runs"] == 3

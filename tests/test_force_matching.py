@@ -407,3 +407,57 @@ def test_cli_forces_lifts_the_heavy_cube_with_allegro(tmp_path):
     pressed = m["finger_force_mean_n"]["th"]
     assert pressed > 0.5 * weight, m["finger_force_mean_n"]  # the thumb opposes the fingers
     assert m["object_force_error_mean_n"] < 0.15 * weight
+
+
+def test_refinement_finger_action_closes_the_finger_on_the_object():
+    """``RefineConfig.finger_close_m``: on the frames where its human finger touches, each
+    finger's action column also moves the fingertip that far towards the object's centre
+    (first order: MuJoCo's kinematics at the commanded step), on top of the force offset; on
+    the other frames, and for the wrist, the columns are unchanged."""
+    import mujoco
+
+    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.loaders.selection import load_demonstration
+    from retarget.hands import get_hand
+    from retarget.refine import RefineConfig, _tracking_env
+    from retarget.retargeter import Retargeter
+
+    demo = load_demonstration("cube2/tripod").slice(250, 330)
+    hand, geo = get_hand("allegro"), object_geometry("cube2")
+    rt = Retargeter(hand, geo)
+    robot = rt.retarget(demo)
+    env0, act_q, _ = _tracking_env(
+        hand, geo, demo, robot, rt.tip_sites, RefineConfig(finger_close_m=0.0)
+    )
+    env1, _, _ = _tracking_env(
+        hand, geo, demo, robot, rt.tip_sites, RefineConfig(finger_close_m=0.005)
+    )
+    dM = env1.M - env0.M  # (T, nu, 6 + F)
+    assert not dM[:, :, :6].any()
+    m = env1.scene.model
+    d = mujoco.MjData(m)
+
+    def tip(q, site):
+        d.qpos[: q.size] = q
+        mujoco.mj_kinematics(m, d)
+        return d.site_xpos[site].copy()
+
+    checked = 0
+    for i, name in enumerate(rt.tip_sites):
+        on = robot.contact_active[:, i]
+        assert not dM[~on, :, 6 + i].any()
+        if not on.any():
+            continue
+        site = m.site(name).id
+        for t in np.flatnonzero(on)[:: max(1, on.sum() // 4)]:
+            q = robot.q[t]
+            step = np.zeros_like(q)
+            step[act_q] = dM[t, :, 6 + i]
+            p0 = tip(q, site)
+            moved = tip(q + step, site) - p0
+            towards = demo.object.pos[t] - p0
+            towards /= np.linalg.norm(towards)
+            assert 0.6 * 0.005 < np.linalg.norm(moved) < 1.05 * 0.005
+            assert moved @ towards > 0.9 * np.linalg.norm(moved)
+            checked += 1
+    assert checked >= 8
