@@ -6,7 +6,7 @@ robot's own scene (its actuators, the object free on the table, the re-simulatio
 settings). The residual action is the wrist pose (3 × 3 cm, 3 × 0.15 rad) plus one action per
 robot finger: a scale on its force-matching / squeeze offset (``u_f = +1`` presses twice as
 hard, ``−1`` not at all) plus, on the frames where its human finger touches, a joint step
-moving its fingertip ``finger_close_m`` towards the object's centre (``−1``: away). The reward
+moving its fingertip ``finger_close_m`` towards the object's origin (``−1``: away). The reward
 is the tracker's (object pose, the robot fingertips staying where the retargeting put them
 relative to the object on contact frames, action and residual size).
 
@@ -68,9 +68,10 @@ class RefineConfig:
     refinement still failed at 2): 4 more rescued, 38 s of CPU per refinement on those runs
     instead of 12 s (README, force preservation)."""
     finger_close_m: float = 0.04
-    """Each finger's action also moves its fingertip this far [m] towards the object's centre
-    at ``u_f = 1`` (away at ``−1``; first order, damped least squares over the finger's
-    servoed joints) on the frames where its human finger touches. With the force offset
+    """Each finger's action also moves its fingertip this far [m] towards the object's origin
+    (its frame's; the centre of a primitive) at ``u_f = 1`` (away at ``−1``; first order,
+    damped least squares over the finger's servoed joints) on the frames where its human
+    finger touches. With the force offset
     alone (0) a finger the plan presses lightly, or one the re-simulation leaves short of the
     object, cannot be brought onto it. Measured on the force-preservation benchmark's cached
     human simulations (Shadow, Ability, Inspire, SVH and LEAP, ``--variants e``; (d) replays
@@ -279,16 +280,16 @@ def _tracking_env(hand, geometry, human, robot, tip_sites, cfg: RefineConfig):
         if act_q[a] < 6:
             basis[:, a, act_q[a]] = cfg.scale_pos_m if act_q[a] < 3 else cfg.scale_rot_rad
     parts = hand.hand_parts(m)
-    robot_fingers = [hand.fingers[f] for f in _human_fingers(hand, tip_sites)]
-    for i, rf in enumerate(robot_fingers):
+    finger_acts = []  # per tip site, the actuators of its robot finger
+    for rf in (hand.fingers[f] for f in _human_fingers(hand, tip_sites)):
         ids = {m.body(b).id for b in parts.get(rf, [])}
-        for a in range(m.nu):
-            if m.jnt_bodyid[m.actuator_trnid[a, 0]] in ids:
-                basis[:, a, 6 + i] = offsets[:, a]
+        finger_acts.append([a for a in range(m.nu) if m.jnt_bodyid[m.actuator_trnid[a, 0]] in ids])
+    for i, acts in enumerate(finger_acts):
+        basis[:, acts, 6 + i] = offsets[:, acts]
     R_o = np.stack([_rotm(q) for q in aa_to_quat_wxyz(human.object.rot_aa.astype(np.float64))])
     p_o = human.object.pos.astype(np.float64)
     if cfg.finger_close_m > 0:
-        _add_closing(basis, scene, robot, hand, tip_sites, robot_fingers, p_o, cfg.finger_close_m)
+        _add_closing(basis, m, robot, tip_sites, finger_acts, p_o, cfg.finger_close_m)
     tips_obj = np.einsum("tji,tfj->tfi", R_o, robot.tip_pos_world - p_o[:, None])
     w = robot.contact_active.astype(np.float64)
     n = max(1, round(0.1 * human.fps))
@@ -308,33 +309,31 @@ def _tracking_env(hand, geometry, human, robot, tip_sites, cfg: RefineConfig):
     return env, act_q, ctrl_ref
 
 
-def _add_closing(basis, scene, robot, hand, tip_sites, robot_fingers, p_o, close_m: float):
+def _add_closing(basis, m, robot, tip_sites, finger_acts, p_o, close_m: float) -> None:
     """``finger_close_m``: add to each finger's action column ``basis[:, :, 6 + i]`` the joint
-    step that moves its fingertip ``close_m`` [m] towards the object's centre ``p_o`` (T, 3),
+    step that moves its fingertip ``close_m`` [m] towards the object's origin ``p_o`` (T, 3),
     on the frames where its human finger touches: damped least squares over the finger's
-    servoed joints, ``Δq = Jᵀ (J Jᵀ + λ I)⁻¹ δ`` with ``λ = 10⁻⁴ m²`` (a finger's ``J Jᵀ`` is
-    ~(5 cm)² along its reach; near a singular posture the step stays short instead of large)."""
-    m = scene.model
+    servoed joints (``finger_acts[i]``), ``Δq = Jᵀ (J Jᵀ + λ I)⁻¹ δ`` with ``λ = 10⁻⁴ m²`` (a
+    finger's ``J Jᵀ`` is ~(5 cm)² along its reach; near a singular posture the step stays short
+    instead of large). One kinematics pass per frame serves every finger."""
     d = mujoco.MjData(m)
-    parts = hand.hand_parts(m)
     jacp = np.zeros((3, m.nv))
     nq = robot.q.shape[1]
-    for i, rf in enumerate(robot_fingers):
-        ids = {m.body(b).id for b in parts.get(rf, [])}
-        acts = [a for a in range(m.nu) if m.jnt_bodyid[m.actuator_trnid[a, 0]] in ids]
-        if not acts:
-            continue
-        dofs = [int(m.jnt_dofadr[m.actuator_trnid[a, 0]]) for a in acts]
-        site = m.site(tip_sites[i]).id
-        for t in np.flatnonzero(robot.contact_active[:, i]):
-            d.qpos[:nq] = robot.q[t]
-            mujoco.mj_kinematics(m, d)
-            mujoco.mj_comPos(m, d)  # (the Jacobians need cdof)
-            mujoco.mj_jacSite(m, d, jacp, None, site)
-            J = jacp[:, dofs]
-            u = p_o[t] - d.site_xpos[site]
+    sites = [m.site(s).id for s in tip_sites]
+    dofs = [[int(m.jnt_dofadr[m.actuator_trnid[a, 0]]) for a in acts] for acts in finger_acts]
+    touching = robot.contact_active
+    for t in np.flatnonzero(touching.any(axis=1)):
+        d.qpos[:nq] = robot.q[t]
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)  # (the Jacobians need cdof)
+        for i in np.flatnonzero(touching[t]):
+            if not finger_acts[i]:
+                continue
+            mujoco.mj_jacSite(m, d, jacp, None, sites[i])
+            J = jacp[:, dofs[i]]
+            u = p_o[t] - d.site_xpos[sites[i]]
             u *= close_m / max(float(np.linalg.norm(u)), 1e-9)
-            basis[t, acts, 6 + i] += J.T @ np.linalg.solve(J @ J.T + 1e-4 * np.eye(3), u)
+            basis[t, finger_acts[i], 6 + i] += J.T @ np.linalg.solve(J @ J.T + 1e-4 * np.eye(3), u)
 
 
 @dataclass
