@@ -280,6 +280,14 @@ def _baseline(hand_name: str, wrist: str):
     return DexRetargetingBaseline(get_hand(hand_name), DexRetargetingConfig(wrist=wrist))
 
 
+FORCE_KEYS = (
+    "force_per_finger", "force_correlation_mean", "force_profile_correlation_mean",
+    "object_force_error_mean_n", "object_force_error_contact_frames_mean_n",
+    "object_force_error_pct_weight", "contact_precision", "contact_recall",
+)  # fmt: skip
+"""A row's force columns (:func:`retarget.run.force_metrics`, + % of the weight)."""
+
+
 def _force_columns(robot_d, sim_res, human, retargeter, variant: str) -> dict:
     """``force_metrics`` of one variant's re-simulation against the human's forces: every
     variant is compared with the human per-finger forces (d)'s retargeter mapped onto this
@@ -304,7 +312,7 @@ def _hand_job(args) -> list[dict]:
     from retarget.baselines import KinematicMetrics, measure_trajectory
     from retarget.hands import get_hand
     from retarget.retargeter import RetargetConfig, Retargeter
-    from retarget.run import FORCE_CONTACT_TIMECONST
+    from retarget.run import FORCE_CONTACT_TIMECONST, refined_force_metrics
     from retarget.validate import Resimulator, ValidateConfig
 
     base, traj, human, dex_wrist, computed, overrides = args
@@ -416,6 +424,12 @@ def _hand_job(args) -> list[dict]:
                     finger_ctrl_deviation_mean_rad=rm["finger_ctrl_deviation_mean_rad"],
                     wrist_pos_deviation_mean_m=rm["wrist_pos_deviation_mean_m"],
                 )
+                # forces of the refined simulation (over the frames it tracked)
+                fm = refined_force_metrics(robot_d, rf, human, retargeters["d"])
+                if fm is not None:
+                    err = fm["object_force_error_mean_n"]
+                    fm["object_force_error_pct_weight"] = None if err is None else err / weight_n
+                    row.update(fm, wrench_feasible_fraction=None)
             except Exception as e:
                 row.update(_error(e))
             row["wall_s"] = time.perf_counter() - t0
@@ -431,6 +445,10 @@ def _hand_job(args) -> list[dict]:
                     rows[v].update(fm)
                 except Exception as e:
                     rows[v]["force_metrics_error"] = f"{type(e).__name__}: {e}"
+            # (e) where (d)'s replay succeeded is that replay: its forces too
+            if rows["e"].get("refined") is False and "force_per_finger" in rows["d"]:
+                rows["e"].update({k: rows["d"][k] for k in FORCE_KEYS if k in rows["d"]})
+                rows["e"]["wrench_feasible_fraction"] = None
     except Exception as e:  # the hand or the scene could not be built: every variant fails
         for r in rows.values():
             if "error" not in r and "skipped" not in r:
@@ -674,6 +692,24 @@ def target_checks(scope: str, rows: list[dict], agg: dict, hv: dict) -> list[dic
             "met": None if not e["runs"] else at_least(e["success_rate"], TARGET_SUCCESS),
         },
         heavy("e"),
+        {
+            "scope": scope,
+            "name": "correlation",
+            "target": f"force profile correlation ≥ {TARGET_CORRELATION:g} (successful (e) "
+            "runs, whole demonstration)",
+            "value": e["force_profile_correlation_mean_successful"],
+            "met": at_least(e["force_profile_correlation_mean_successful"], TARGET_CORRELATION),
+        },
+        {
+            "scope": scope,
+            "name": "force error",
+            "target": f"object force error ≤ {100 * TARGET_FORCE_PCT_WEIGHT:.0f} % of weight "
+            "(successful (e) runs)",
+            "value": e["object_force_error_pct_weight_successful"],
+            "met": None
+            if e["object_force_error_pct_weight_successful"] is None
+            else bool(e["object_force_error_pct_weight_successful"] <= TARGET_FORCE_PCT_WEIGHT),
+        },
     ]
 
 

@@ -126,6 +126,11 @@ class RefineResult:
     compute_s: float
     attempts: int = 1
     """Tracking attempts (1 + the backtracking retries used)."""
+    finger_force_world: np.ndarray | None = None
+    """(T_tracked, F + 1, 3) [N]: force of each robot finger (``fingers`` order) and the palm
+    on the object in the refined simulation, world frame, averaged over the frame's physics
+    steps (the re-simulation's ``ValidationResult.finger_force_world`` layout)."""
+    fingers: list[str] = field(default_factory=list)
 
     def metrics(self) -> dict:
         return {
@@ -140,6 +145,16 @@ class RefineResult:
             "wrist_rot_deviation_mean_rad": self.wrist_rot_deviation_rad,
             "compute_s": self.compute_s,
             "attempts": self.attempts,
+            **(
+                {}
+                if self.finger_force_world is None
+                else {
+                    "finger_force_mean_n": {
+                        f: float(np.linalg.norm(self.finger_force_world[:, i], axis=1).mean())
+                        for i, f in enumerate([*self.fingers, "palm"])
+                    }
+                }
+            ),
         }
 
 
@@ -247,6 +262,7 @@ def refine(hand, geometry, human, robot, tip_sites: list[str], cfg: RefineConfig
     wrist_rot = [a for a in range(m.nu) if 3 <= act_q[a] < 6]
     fingers = [a for a in range(m.nu) if act_q[a] >= 6]
     pos_err = np.asarray(log.pos_err)
+    robot_fingers = list(hand.robot_fingers)
     return RefineResult(
         success=env.failed_at is None and Tt == T and bool((pos_err <= 0.05).all()),
         failed_at_frame=env.failed_at,
@@ -259,7 +275,26 @@ def refine(hand, geometry, human, robot, tip_sites: list[str], cfg: RefineConfig
         wrist_rot_deviation_rad=float(np.linalg.norm(dev[:, wrist_rot], axis=1).mean()),
         compute_s=cpu,
         attempts=attempts,
+        finger_force_world=_finger_forces(hand, m, robot_fingers, log.contacts),
+        fingers=robot_fingers,
     )
+
+
+def _finger_forces(hand, m: mujoco.MjModel, fingers: list[str], contacts) -> np.ndarray:
+    """(len(contacts), F + 1, 3) [N]: per frame, the summed force of each robot finger's
+    bodies (``fingers`` order, then the palm) on the object, from the tracker's per-frame
+    hand–object contact pairs (``FrameContacts``)."""
+    parts = hand.hand_parts(m)
+    body_part = np.full(m.nbody, -1)
+    for i, f in enumerate([*fingers, "palm"]):
+        for b in parts.get(f, []):
+            body_part[m.body(b).id] = i
+    out = np.zeros((len(contacts), len(fingers) + 1, 3))
+    for t, fc in enumerate(contacts):
+        part = body_part[m.geom_bodyid[fc.hand_geom]]
+        keep = part >= 0
+        np.add.at(out[t], part[keep], fc.force[keep])
+    return out
 
 
 def _tracking_env(hand, geometry, human, robot, tip_sites, cfg: RefineConfig):

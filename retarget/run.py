@@ -200,6 +200,26 @@ def force_metrics(robot, sim, human, retargeter) -> dict:
     }
 
 
+def refined_force_metrics(robot, refined, human, retargeter) -> dict | None:
+    """:func:`force_metrics` of the physics refinement's simulation (``RefineResult``) over the
+    frames it tracked (all of them unless it lost the object), against the same human forces
+    and force plan as the re-simulation's; ``wrench_feasible_fraction`` is the force QP's, not
+    the refinement's, and is left out. ``None`` when it lost the object within 3 frames."""
+    from types import SimpleNamespace
+
+    Tt = refined.finger_force_world.shape[0]
+    if Tt < 3:
+        return None
+    part = SimpleNamespace(
+        human_force=robot.human_force[:Tt], wrench_shortfall=robot.wrench_shortfall[:Tt]
+    )
+    sim = SimpleNamespace(finger_force_world=refined.finger_force_world, fingers=refined.fingers)
+    human_t = human if Tt == human.num_frames else human.slice(0, Tt)
+    m = force_metrics(part, sim, human_t, retargeter)
+    m.pop("wrench_feasible_fraction")
+    return m
+
+
 def _num(x: float | None) -> str:
     return "–" if x is None else f"{x:.2f}"
 
@@ -290,6 +310,8 @@ def run_retarget(cfg: RunConfig) -> dict:
                 task(1, 1)
         metrics["refine"] = refined.metrics()
         metrics["success_refined"] = refined.success
+        if cfg.forces:
+            metrics["refine"]["forces"] = refined_force_metrics(robot, refined, traj, retargeter)
     robot.meta["simulation"] = sim.meta
     _save(out_dir, robot, sim, refined)
     _atomic_write_text(out_dir / "metrics.json", json.dumps(metrics, indent=2, sort_keys=True))
@@ -427,6 +449,14 @@ def _print_summary(m: dict, out_dir: Path) -> None:
             f"{1000 * r['wrist_pos_deviation_mean_m']:.1f} mm (wrist); "
             f"{r['attempts']} attempt{'s' if r['attempts'] > 1 else ''}, {r['compute_s']:.1f} s",
         )
+        if r.get("forces"):
+            rf = r["forces"]
+            t.add_row(
+                "refined force matching",
+                f"correlation {_num(rf['force_profile_correlation_mean'])} (whole clip) / "
+                f"{_num(rf['force_correlation_mean'])} (contact frames), object force error "
+                f"{_num(rf['object_force_error_mean_n'])} N",
+            )
     t.add_row("speed", f"{m['ms_per_frame']:.2f} ms/frame ({m['backend']})")
     t.add_row("written", f"{out_dir}/robot_trajectory.npz, metrics.json")
     Console().print(t)

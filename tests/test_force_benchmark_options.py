@@ -99,3 +99,15 @@ def test_targets_do_not_compare_with_a_variant_that_was_not_run():
     e = next(c for c in fp.target_checks("five", rows, agg, fp.heavy_vs_light(rows))
              if c["target"].startswith("(e) strict"))  # fmt: skip
     assert e["met"] is True and e["value"] == 1.0 and e["runs"] == 3
+    # (e)'s rows carry no forces yet: its correlation target is not measured; with forces on
+    # its successful runs (the refined simulation's), it is, over those runs only
+    corr_e = next(c for c in fp.target_checks("five", rows, agg, fp.heavy_vs_light(rows))
+                  if "successful (e)" in c["target"] and c["name"] == "correlation")  # fmt: skip
+    assert corr_e["met"] is None
+    for r, c in zip((r for r in rows if r["variant"] == "e"), (0.9, 0.7, 0.95), strict=True):
+        r["force_profile_correlation_mean"] = c
+    rows.append({**rows[-1], "pair": "p3", "success": False, "force_profile_correlation_mean": 0.0})
+    agg = fp.aggregate_variants(rows)
+    corr_e = next(c for c in fp.target_checks("five", rows, agg, fp.heavy_vs_light(rows))
+                  if "successful (e)" in c["target"] and c["name"] == "correlation")  # fmt: skip
+    assert corr_e["value"] == pytest.approx(0.85) and corr_e["met"] is True

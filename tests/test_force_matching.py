@@ -166,6 +166,7 @@ def human_with_forces():
 
 def test_retargeter_matches_the_human_object_force(human_with_forces):
     from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.rotations import aa_to_matrix
     from retarget.hands import get_hand
     from retarget.retargeter import RetargetConfig, Retargeter
 
@@ -186,6 +187,38 @@ def test_retargeter_matches_the_human_object_force(human_with_forces):
     # and become servo offsets on the contact frames only
     dq = np.abs(out.q_command - out.q)[:, 6:].max(axis=1)
     assert dq[touching].min() > 1e-4
+    # A refinement whose fingers pressed exactly as planned, that lost the object at frame 90:
+    # its force metrics cover the 90 frames it tracked, the profile correlation is 1 for
+    # every finger, and the object force error is the plan's own over those frames.
+    from types import SimpleNamespace
+
+    from retarget.run import refined_force_metrics
+
+    hand = r.hand
+    fingers = list(hand.robot_fingers)
+    planned = np.zeros((90, len(fingers) + 1, 3))
+    for i, f in enumerate(r.tip_human):
+        planned[:, fingers.index(hand.fingers[f])] = out.human_force[:90, i]
+    refined = SimpleNamespace(finger_force_world=planned, fingers=fingers)
+    m = refined_force_metrics(out, refined, traj, r)
+    assert "wrench_feasible_fraction" not in m
+    pressing = {f: v for f, v in m["force_per_finger"].items() if v["profile_correlation"]}
+    assert len(pressing) >= 2  # (a finger the plan never loads has no correlation)
+    for f, v in pressing.items():
+        assert v["profile_correlation"] == pytest.approx(1.0), f
+        assert v["relative_magnitude_error"] == pytest.approx(0.0, abs=1e-6), f
+    lifted = (
+        r.geometry.lowest_z(
+            aa_to_matrix(traj.object.rot_aa[:90].astype(np.float64)),
+            traj.object.pos[:90].astype(np.float64),
+        )
+        > 0.01
+    )
+    plan_err = np.linalg.norm(out.human_force[:90].sum(1) - human[:90], axis=1)
+    sel = touching[:90] & lifted
+    assert m["object_force_error_mean_n"] == pytest.approx(plan_err[sel].mean(), rel=1e-5)
+    too_short = SimpleNamespace(finger_force_world=planned[:2], fingers=fingers)
+    assert refined_force_metrics(out, too_short, traj, r) is None
 
 
 def test_contact_flags_come_from_the_captured_geometry_unless_asked(human_with_forces):
@@ -262,6 +295,7 @@ def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
     hand keeps it (DexCanvas rule, no frame over 5 cm), moving the commands by millimetres."""
     from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.loaders.selection import load_demonstration
+    from dexcanvas_core.rotations import aa_to_matrix
     from retarget.hands import get_hand
     from retarget.refine import RefineConfig, refine
     from retarget.retargeter import RetargetConfig, Retargeter
@@ -292,6 +326,19 @@ def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
     assert refined.ctrl.shape == (demo.num_frames, hand.compile().nu)
     m = refined.metrics()
     assert m["frames_tracked"] == demo.num_frames and m["compute_s"] > 0
+    # The refined simulation's finger forces carry the lifted cuboid's weight (the mean over
+    # the frames the human holds it 4 cm or more above the table, where the refined one, within
+    # 5 cm of it, cannot touch the table; its mean acceleration there is small): 1.76 N
+    # measured against m·g = 1.85 N, and no net horizontal force.
+    assert refined.fingers == ["th", "ff", "mf", "rf"]
+    assert refined.finger_force_world.shape == (demo.num_frames, 5, 3)
+    R_o = aa_to_matrix(demo.object.rot_aa.astype(np.float64))
+    lifted = geo.lowest_z(R_o, demo.object.pos.astype(np.float64)) > 0.04
+    assert lifted.sum() > 100
+    net = refined.finger_force_world[lifted].sum(axis=1).mean(axis=0)
+    weight = geo.mass_kg * 9.81
+    assert abs(net[2] - weight) < 0.1 * weight and np.linalg.norm(net[:2]) < 0.05 * weight
+    assert m["finger_force_mean_n"]["th"] > 1.0  # the thumb opposes the fingers
     with pytest.raises(RetargetError, match="unknown refinement tracker"):
         refine(hand, geo, demo, robot, rt.tip_sites, RefineConfig(tracker="ppo"))
 
