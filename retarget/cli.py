@@ -144,10 +144,10 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--refine-retries",
         type=_non_negative_int,
-        default=2,
+        default=4,  # RunConfig.refine_retries (retarget.run is imported only to run)
         metavar="N",
         help="times the refinement backtracks 0.5 s (× attempt) when it loses the object "
-        "(default 2; 0: one attempt)",
+        "(default 4; 0: one attempt)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     p.add_argument(

@@ -56,7 +56,7 @@ class RefineConfig:
     contact_timeconst: float | None = 0.005
     """Contact solref time constant [s] (the force-matching re-simulation's); None: defaults."""
     max_timestep_s: float = 0.0025
-    retries: int = 2
+    retries: int = 4
     """``mpc``: when the object is lost, go back ``backtrack_s`` × the attempt number before
     the failure (to the last checkpoint there) and track again from that physics state with a
     new random stream and ``retry_samples`` × as many samples as the last attempt; up to this
@@ -66,7 +66,10 @@ class RefineConfig:
     (13.1 s); one attempt with 48 samples 22 (20.4 s), with a 0.4 s horizon and 4 knots 22
     (14.0 s), with 2× the sampling noise 13. 4 retries (2026-12-04, the 41 such runs whose
     refinement still failed at 2): 4 more rescued, 38 s of CPU per refinement on those runs
-    instead of 12 s (README, force preservation)."""
+    instead of 12 s (README, force preservation). With ``finger_close_m`` (2026-12-04, the
+    five-finger hands and LEAP, ``--variants e`` on the cached human simulations), 2 → 4
+    retries: five-finger (e) strict success 83.0 → 87.5 %, LEAP 78.6 → 82.1 %, CPU per
+    refinement 14.8 → 24.2 s on average (13.4 → 39.1 s on those that still fail); so 4."""
     finger_close_m: float = 0.04
     """Each finger's action also moves its fingertip this far [m] towards the object's origin
     (its frame's; the centre of a primitive) at ``u_f = 1`` (away at ``−1``; first order,

@@ -52,7 +52,7 @@ class RunConfig:
     """When the re-simulation fails, run the physics refinement (``retarget.refine``: the
     force pipeline's sampling MPC on the robot hand) and report it next to the open-loop
     result."""
-    refine_retries: int = 2
+    refine_retries: int = 4
     """How often the refinement backtracks when it loses the object (``RefineConfig.retries``)."""
     progress: bool = True
     """Show progress bars and the summary on the terminal."""

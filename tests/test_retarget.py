@@ -323,6 +323,20 @@ def test_cli_run_refuses_negative_refine_retries(capsys):
     assert "--refine-retries: expected a whole number >= 0, got '-1'" in capsys.readouterr().err
 
 
+def test_cli_run_defaults_are_the_run_config_defaults():
+    """The CLI states its defaults literally (``retarget.run`` loads only to run): they must
+    be ``RunConfig``'s, and ``RunConfig``'s refinement retries ``RefineConfig``'s."""
+    from retarget.cli import _plain_run_config, build_parser
+    from retarget.refine import RefineConfig
+    from retarget.run import RunConfig
+
+    args = build_parser().parse_args(["run", "--hand", "shadow", "--pair", "cube2/tripod"])
+    cli = _plain_run_config(args)
+    ref = RunConfig(hand="shadow", pair="cube2/tripod")
+    assert cli == ref
+    assert ref.refine_retries == RefineConfig().retries == 4
+
+
 def test_cli_run_pair_missing_from_dataset(small_dataset, capsys):
     rc = main(
         [
