@@ -893,7 +893,9 @@ def plot_success(per_hand: dict, scope_aggs: dict, path: Path) -> Path:
                 fontsize=6,
             )
     ax.axhline(100 * TARGET_SUCCESS, color="k", lw=0.8, ls="--")
-    ax.text(len(names) - 0.5, 100 * TARGET_SUCCESS + 1, "target (d) 85 %", ha="right", fontsize=7)
+    ax.text(
+        len(names) - 0.5, 100 * TARGET_SUCCESS + 1, "target (d) or (e) 85 %", ha="right", fontsize=7
+    )
     ax.set_xticks(x, names)
     ax.set_ylim(0, 110)
     ax.set_ylabel("strict success [%] (no frame > 5 cm)")
