@@ -332,6 +332,10 @@ def _save(out_dir: Path, robot, sim, refined=None) -> None:
             "object_rot_err": sim.object_rot_err,
             "finger_force_world": sim.finger_force_world,
             "force_parts": np.array([*sim.fingers, "palm"]),
+            "q_sim": sim.q_sim,
+            "finger_servo_err": sim.finger_servo_err,
+            "wrist_pos_tracking_err": sim.wrist_pos_err,
+            "wrist_rot_tracking_err": sim.wrist_rot_err,
         },
     )
 
@@ -429,6 +433,13 @@ def _print_summary(m: dict, out_dir: Path) -> None:
         f"{1000 * m['penetration_max_m']:.1f} / {1000 * m['sim_penetration_max_m']:.1f} mm",
     )
     t.add_row("finger–finger penetration max", f"{1000 * m['self_penetration_max_m']:.1f} mm")
+    if "finger_servo_err_mean_deg" in m:
+        t.add_row(
+            "servo tracking error mean (sim − command)",
+            f"wrist {1000 * m['wrist_pos_tracking_err_mean_m']:.1f} mm / "
+            f"{m['wrist_rot_tracking_err_mean_deg']:.1f}°; each finger's worst joint: "
+            + ", ".join(f"{k} {v:.1f}°" for k, v in m["finger_servo_err_mean_deg"].items()),
+        )
     forces = ", ".join(f"{k} {v:.2f}" for k, v in m["finger_force_mean_n"].items())
     t.add_row("mean contact force [N]", forces)
     if m.get("force_correlation_mean") is not None:

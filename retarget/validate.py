@@ -25,6 +25,7 @@ from dexcanvas_core.rotations import aa_to_quat_wxyz, quat_wxyz_to_aa, rotation_
 from dexcanvas_core.sim.forces import object_contacts
 from dexcanvas_core.trajectory import Trajectory
 from retarget.errors import RetargetError
+from retarget.hands.base import WRIST_JOINTS
 from retarget.scene import OBJECT_BODY, add_object, add_table
 
 log = logging.getLogger(__name__)
@@ -72,6 +73,16 @@ class ValidationResult:
     first_failure_frame: int | None
     timestep: float
     meta: dict = field(default_factory=dict)
+    q_sim: np.ndarray | None = None
+    """(T, hand_nq) simulated hand joint positions at the end of each frame."""
+    finger_servo_err: np.ndarray | None = None
+    """(T, F) [rad] per robot finger (``fingers`` order), the largest ``|q_sim − q_command|``
+    over its actuated joints at the end of each frame: how far its servos trail the command (a
+    finger the object blocks trails it by design, by its force offset)."""
+    wrist_pos_err: np.ndarray | None = None
+    """(T,) [m] distance of the simulated wrist (its three slide joints) from the command."""
+    wrist_rot_err: np.ndarray | None = None
+    """(T,) [rad] largest ``|q_sim − q_command|`` over the wrist's three hinge joints."""
 
     @property
     def object_pos_err_max_m(self) -> float:
@@ -84,6 +95,19 @@ class ValidationResult:
     @property
     def object_rot_err_mean_rad(self) -> float:
         return float(self.object_rot_err.mean())
+
+    def servo_metrics(self) -> dict:
+        """Mean servo tracking errors (empty when the rollout did not record them)."""
+        if self.finger_servo_err is None or self.wrist_pos_err is None:
+            return {}
+        return {
+            "finger_servo_err_mean_deg": {
+                f: float(np.degrees(self.finger_servo_err[:, i].mean()))
+                for i, f in enumerate(self.fingers)
+            },
+            "wrist_pos_tracking_err_mean_m": float(self.wrist_pos_err.mean()),
+            "wrist_rot_tracking_err_mean_deg": float(np.degrees(self.wrist_rot_err.mean())),
+        }
 
     def metrics(self) -> dict:
         return {
@@ -98,6 +122,7 @@ class ValidationResult:
                 f: float(np.linalg.norm(self.finger_force_world[:, i], axis=1).mean())
                 for i, f in enumerate([*self.fingers, "palm"])
             },
+            **self.servo_metrics(),
         }
 
 
@@ -141,6 +166,12 @@ class Resimulator:
             for bname in parts.get(f, []):
                 body_part[m.body(bname).id] = i
         self.body_part = body_part
+        # Per actuator: the finger (index into ``fingers``) its joint moves, -1 for the wrist
+        # and the palm; the wrist's slide and hinge joints (qpos indices).
+        jb = m.jnt_bodyid[[m.actuator_trnid[a, 0] for a in range(m.nu)]]
+        self.act_finger = np.where(body_part[jb] < len(self.fingers), body_part[jb], -1)
+        wq = [int(m.jnt_qposadr[m.joint(j).id]) for j in WRIST_JOINTS]
+        self.wrist_slide_q, self.wrist_hinge_q = np.array(wq[:3]), np.array(wq[3:])
 
     def run(
         self,
@@ -171,6 +202,7 @@ class Resimulator:
         F = len(self.fingers) + 1
         forces = np.zeros((T, F, 3))
         pos_sim = np.zeros((T, 3))
+        q_sim = np.zeros((T, self.hand_nq))
         rot_sim = np.zeros((T, 3))
         pen = 0.0
         ts = human.timestamp
@@ -193,12 +225,20 @@ class Resimulator:
                 acc, n_read, pen = f, 1, max(pen, p)
             forces[t] = acc / n_read
             pos_sim[t] = d.qpos[self.obj_qadr : self.obj_qadr + 3]
+            q_sim[t] = d.qpos[: self.hand_nq]
             rot_sim[t] = quat_wxyz_to_aa(d.qpos[self.obj_qadr + 3 : self.obj_qadr + 7])
             if progress is not None:
                 progress(t + 1, T)
             if not np.all(np.isfinite(d.qpos)):
                 raise RetargetError(f"simulation diverged at frame {t} (non-finite state)")
         pos_err = np.linalg.norm(pos_sim - p_obj, axis=1)
+        dq = np.abs(q_sim - q)
+        act_err = dq[:, self.act_q]
+        finger_servo = np.zeros((T, len(self.fingers)))
+        for i in range(len(self.fingers)):
+            cols = self.act_finger == i
+            if cols.any():
+                finger_servo[:, i] = act_err[:, cols].max(axis=1)
         rot_err = rotation_angle_between_aa(rot_sim, r_obj)
         over = np.flatnonzero(pos_err > self.cfg.success_threshold_m)
         return ValidationResult(
@@ -215,6 +255,12 @@ class Resimulator:
             penetration_max_m=pen,
             first_failure_frame=int(over[0]) if over.size else None,
             timestep=float(m.opt.timestep),
+            q_sim=q_sim,
+            finger_servo_err=finger_servo,
+            wrist_pos_err=np.linalg.norm(
+                q_sim[:, self.wrist_slide_q] - q[:, self.wrist_slide_q], axis=1
+            ),
+            wrist_rot_err=dq[:, self.wrist_hinge_q].max(axis=1),
             meta={
                 "integrator": "implicitfast",
                 "cone": "elliptic",

@@ -54,7 +54,7 @@ def test_report_is_offline_and_complete(report):
     page = report.read_text()
     assert "http://" not in page and "https://" not in page
     srcs = re.findall(r'src="([^"]*)"', page)
-    assert len(srcs) == 6  # 3 stills, forces, object error, heatmap
+    assert len(srcs) == 7  # 3 stills, forces, object error, servo tracking, heatmap
     assert all(s.startswith("data:image/") for s in srcs)
     for href in re.findall(r"href='([^']*)'", page):
         assert (report.parent / href).is_file(), href  # relative links to files that exist
@@ -76,7 +76,7 @@ def test_report_images_resolve_in_headless_chromium(report, tmp_path):
     widths = re.search(r'data-image-widths="([^"]*)"', dom)
     assert widths, dom[:500]
     values = [int(w) for w in widths.group(1).split(",")]
-    assert len(values) == 6 and min(values) > 100, values
+    assert len(values) == 7 and min(values) > 100, values
     assert tagged_processes() == []
 
 
@@ -136,6 +136,13 @@ def test_plots_write_png_and_svg(tmp_path):
         plots.plot_object_error(tmp_path / "e.png", t, err[:-1], err)
     with pytest.raises(VizError, match=r"\(T, 6\)"):
         plots.plot_finger_forces(tmp_path / "f.png", t, forces[:, :5])
+    servo = np.radians(np.abs(np.sin(t))[:, None] * [1.0, 5.0])
+    out = plots.plot_servo_tracking(
+        tmp_path / "s.png", t, servo, ["th", "ff"], 1e-3 * t, human_fingers={"th": "thumb"}
+    )
+    assert out.stat().st_size > 5000
+    with pytest.raises(VizError, match=r"\(T, 2\)"):
+        plots.plot_servo_tracking(tmp_path / "s.png", t, servo[:, :1], ["th", "ff"], t)
 
 
 def test_report_of_several_runs(runs, capsys):
@@ -147,14 +154,15 @@ def test_report_of_several_runs(runs, capsys):
     for hand in ("shadow", "allegro"):
         m = json.loads((runs[hand] / "metrics.json").read_text())
         assert f"{100 * m['object_pos_err_max_m']:.1f} cm" in page
-    # One heatmap over both runs, each run's force and object-error plots, and the stills a
-    # run already has (--no-snapshots renders none for the allegro run).
+    # One heatmap over both runs, each run's force, object-error and servo-tracking plots, and
+    # the stills a run already has (--no-snapshots renders none for the allegro run).
     stills = sum(
         len(json.loads(m.read_text())["files"])
         for m in runs["shadow"].parent.glob("*/snapshots.json")
     )
     assert not (runs["allegro"] / "snapshots.json").exists()
-    assert len(re.findall(r'src="data:image/png', page)) == 1 + 2 * 2 + stills
+    assert len(re.findall(r'src="data:image/png', page)) == 1 + 2 * 3 + stills
+    assert "servo tracking error mean" in page
 
 
 def test_metrics_table_units():
@@ -167,8 +175,13 @@ def test_metrics_table_units():
                 "keypoint_err_mean_m": 0.0175,
                 "ms_per_frame": 2.5,
                 "backend": "pinocchio",
+                "finger_servo_err_mean_deg": {"th": 9.14, "ff": 1.0},
+                "wrist_pos_tracking_err_mean_m": 0.0008,
             }
         )
+    )
+    assert rows["servo tracking error mean (simulation − command)"] == (
+        "wrist 0.8 mm; each finger's worst joint: th 9.1°, ff 1.0°"
     )
     assert rows["object position error max / mean"] == "7.1 / 2.0 cm"
     assert rows["keypoint error mean"] == "17.5 mm" and "no" in rows[next(iter(rows))]

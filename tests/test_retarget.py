@@ -298,6 +298,19 @@ def test_cli_run_writes_outputs(small_dataset, tmp_path, capsys):
     # the weight-aware grip's commanded contact forces (Allegro: 4 fingers)
     assert z["robot_force"].shape == (120, 4, 3) and z["wrench_shortfall"].shape == (120,)
     assert "human_force" not in z.files
+    # servo tracking: recomputed from the simulated and commanded joints in the outputs
+    assert z["q_sim"].shape == z["q_command"].shape == (120, len(z["joint_names"]))
+    names = list(z["joint_names"])
+    slides = [names.index(j) for j in ("wrist_tx", "wrist_ty", "wrist_tz")]
+    werr = np.linalg.norm(z["q_sim"][:, slides] - z["q_command"][:, slides], axis=1)
+    assert m["wrist_pos_tracking_err_mean_m"] == pytest.approx(werr.mean(), rel=1e-9)
+    servo = m["finger_servo_err_mean_deg"]
+    assert set(servo) == set(allegro.robot_fingers)
+    thumb = allegro.robot_fingers.index(allegro.fingers["thumb"])
+    assert servo[allegro.fingers["thumb"]] == pytest.approx(
+        np.degrees(z["finger_servo_err"][:, thumb].mean()), rel=1e-9
+    )
+    assert all(0.0 <= v < 30.0 for v in servo.values())
     assert not list(out.glob(".*tmp"))
 
 
@@ -763,3 +776,37 @@ def test_wrist_weight_scales_the_wrist_term(demo):
     for bad in (-0.1, float("nan"), float("inf")):
         with pytest.raises(HandModelError, match="wrist_weight"):
             dataclasses.replace(shadow, wrist_weight=bad)
+
+
+def test_resimulation_measures_servo_lag(demo):
+    """The re-simulation's servo tracking errors: zero for a held pose in free air, growing
+    with the command's speed for the one joint that moves, zero for the fingers that do not."""
+    from retarget.validate import Resimulator
+
+    hand = get_hand("allegro")
+    sim = Resimulator(hand, object_geometry("cube2"))
+    q0 = hand.default_qpos(sim.model)[: sim.hand_nq].copy()
+    q0[2] = 0.4  # wrist_tz: the hand 40 cm up, touching nothing
+    T = demo.num_frames
+    held = sim.run(np.tile(q0, (T, 1)), demo)
+    m = held.servo_metrics()
+    assert max(m["finger_servo_err_mean_deg"].values()) < 0.01
+    assert m["wrist_pos_tracking_err_mean_m"] < 1e-6
+    assert m["wrist_rot_tracking_err_mean_deg"] < 0.01
+    index = sim.fingers.index(hand.fingers["index"])
+    j = sim.act_q[np.flatnonzero(sim.act_finger == index)[1]]
+    t = demo.timestamp - demo.timestamp[0]
+    lag = {}
+    for hz in (0.5, 2.0):
+        q = np.tile(q0, (T, 1))
+        q[:, j] += 0.3 * np.sin(2 * np.pi * hz * t)
+        res = sim.run(q, demo)
+        assert res.q_sim.shape == (T, sim.hand_nq)
+        # the finger's error is its moving joint's: |q_sim − q| at that joint
+        err_j = np.abs(res.q_sim[:, j] - q[:, j])
+        np.testing.assert_allclose(res.finger_servo_err[:, index], err_j, atol=1e-12)
+        others = [v for f, v in res.servo_metrics()["finger_servo_err_mean_deg"].items()
+                  if f != hand.fingers["index"]]  # fmt: skip
+        assert max(others) < 0.01
+        lag[hz] = float(np.degrees(err_j.mean()))
+    assert 1.0 < lag[0.5] < lag[2.0] / 2

@@ -4,6 +4,8 @@
   with each series' maximum as a dashed line (the DexCanvas paper's Figure 5b);
 * :func:`plot_object_error` — object position and rotation error over time with the 5 cm
   success threshold (the DexCanvas rule) and the failing frames shaded;
+* :func:`plot_servo_tracking` — how far the re-simulated fingers and wrist trail their
+  commands;
 * :func:`plot_contact_heatmap` — per manipulation type, how often each of the 16 hand parts
   touches the object, human and robot side by side, aggregated over runs (Figure 6b).
 
@@ -51,6 +53,12 @@ def _save(fig, out: Path) -> Path:
     )
     _pyplot().close(fig)
     return out
+
+
+def _titled(fig, out: Path, title: str, what: str) -> Path:
+    """Left-aligned figure title ``"title · what"``, then :func:`_save`."""
+    fig.suptitle(f"{title + ' · ' if title else ''}{what}", fontsize=10, x=0.02, ha="left")
+    return _save(fig, out)
 
 
 # ---------------------------------------------------------------------------- forces
@@ -205,13 +213,54 @@ def plot_object_error(
     ax2.set_ylim(0, max(rot.max(), 1.0) * 1.15)
     ax2.grid(alpha=0.3)
     verdict = "success" if not over.any() else f"fails at t = {t[np.argmax(over)]:.2f} s"
-    fig.suptitle(
-        f"{title + ' · ' if title else ''}object error ({verdict}; max {pos.max():.1f} cm)",
-        fontsize=10,
-        x=0.02,
-        ha="left",
+    return _titled(fig, out, title, f"object error ({verdict}; max {pos.max():.1f} cm)")
+
+
+# ---------------------------------------------------------------------------- servo tracking
+
+
+def plot_servo_tracking(
+    out: Path,
+    time_s: np.ndarray,
+    finger_err_rad: np.ndarray,
+    fingers: Sequence[str],
+    wrist_pos_err_m: np.ndarray,
+    *,
+    human_fingers: Mapping[str, str] | None = None,
+    title: str = "",
+) -> Path:
+    """How far the re-simulated hand trails its commands: per robot finger, its worst
+    joint's ``|q_sim − q_command|`` [deg] (a finger pressing on the object trails by its force
+    offset; one that trails in free air is too slow for the motion), and the wrist's position
+    error [mm]. ``human_fingers`` (robot finger → human finger) colours the fingers as the
+    force plots do."""
+    plt = _pyplot()
+    t = np.asarray(time_s, dtype=np.float64)
+    err = np.degrees(np.asarray(finger_err_rad, dtype=np.float64))
+    wrist = 1000 * np.asarray(wrist_pos_err_m, dtype=np.float64)
+    if err.shape != (t.shape[0], len(fingers)) or wrist.shape != t.shape:
+        raise VizError(
+            f"servo errors must be (T, {len(fingers)}) and (T,) with T = {t.shape[0]}, "
+            f"got {err.shape} and {wrist.shape}"
+        )
+    fig, (ax1, ax2) = plt.subplots(
+        2, 1, figsize=(8, 4.6), sharex=True, gridspec_kw={"height_ratios": [2, 1]}
     )
-    return _save(fig, out)
+    for i, f in enumerate(fingers):
+        human = (human_fingers or {}).get(f)
+        color = style.GROUP_COLORS[human][:3] if human in style.GROUP_COLORS else None
+        label = f"{f} ({human})" if human else f
+        ax1.plot(t, err[:, i], color=color, lw=1.2, label=f"{label}: mean {err[:, i].mean():.1f}°")
+    ax1.set_ylabel("worst finger joint [deg]")
+    ax1.set_ylim(0, max(float(err.max()) if err.size else 0.0, 1.0) * 1.15)
+    ax1.legend(fontsize=7, loc="upper left", frameon=False, ncol=2)
+    ax1.grid(alpha=0.3)
+    ax2.plot(t, wrist, color="#34495e", lw=1.2)
+    ax2.set_ylabel("wrist [mm]")
+    ax2.set_xlabel("time [s]")
+    ax2.set_ylim(0, max(float(wrist.max()), 1.0) * 1.15)
+    ax2.grid(alpha=0.3)
+    return _titled(fig, out, title, "servo tracking error (simulation − command)")
 
 
 # ---------------------------------------------------------------------------- heatmap

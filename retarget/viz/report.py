@@ -134,6 +134,23 @@ def _section(run_dir: Path, cfg: ReportConfig) -> RunSection:
             ),
         )
     )
+    if "finger_servo_err" in run.arrays:  # (runs written before it was recorded: none)
+        fingers = [f for f in hand.robot_fingers]
+        to_human = {r: h for h, r in hand.fingers.items() if r}
+        sec.plots.append(
+            (
+                "servo tracking error",
+                plots.plot_servo_tracking(
+                    plot_dir / f"servo{ext}",
+                    t,
+                    run.arrays["finger_servo_err"],
+                    fingers,
+                    run.arrays["wrist_pos_tracking_err"],
+                    human_fingers=to_human,
+                    title=title,
+                ),
+            )
+        )
     # -- stills
     manifest = _read_manifest(run.run_dir)
     if manifest is None and cfg.snapshots and human is not None:
@@ -271,6 +288,16 @@ def metrics_rows(m: dict) -> list[tuple[str, str]]:
             f"{html.escape(str(m.get('uuid')))} ({html.escape(str(m.get('dataset')))})",
         ),
     ]
+    servo = m.get("finger_servo_err_mean_deg") or {}
+    if servo:
+        rows.append(
+            (
+                "servo tracking error mean (simulation − command)",
+                f"wrist {_fmt(m.get('wrist_pos_tracking_err_mean_m'), 1000, ' mm')}; each "
+                "finger's worst joint: "
+                + ", ".join(f"{html.escape(k)} {v:.1f}°" for k, v in servo.items()),
+            )
+        )
     forces = m.get("finger_force_mean_n") or {}
     if forces:
         rows.append(
