@@ -95,9 +95,17 @@ class ContactParams:
 class WristGains:
     """Position servos of the floating wrist (a stand-in for the arm that carries the hand).
 
-    Design values, not a robot's: stiff enough to track 100–120 Hz wrist trajectories to a
-    fraction of a millimetre without contact, soft enough to stay stable at a 2 ms timestep
-    (``sqrt(kp / (m or I + armature)) * timestep`` well below 1 for every hand here).
+    Design values, not a robot's: soft enough to stay stable at a 2 ms timestep
+    (``sqrt(kp / (m or I + armature)) * timestep`` well below 1 for every hand here). Held
+    still, the wrist sits on its target; moving, a critically damped servo trails a target
+    moving at speed ``v`` by ``2 v / ω_n`` (``ω_n = sqrt(kp / m)``, ``m`` the hand's mass).
+    Measured by the re-simulation's ``wrist_pos_tracking_err`` (2026-12-05, every hand on
+    ``retarget run --pair cube2/tripod``): mean 2.1 (SVH) to 5.8 mm (Shadow), peaks 7.7 to
+    23.3 mm; Shadow (0.91 kg, ``2/ω_n`` = 0.043 s) 23.3 mm behind a 0.66 m/s reach
+    (error / speed 0.035 s).
+    The orientation servos trail by 0.1–0.3° on average. A velocity lead on the wrist's
+    commands (``(b + k_v)/k_p · q̇``) did not lift more in the force-preservation benchmark
+    (README): the drops there are slips of 10 cm and more, not this lag.
     """
 
     kp_slide: float = 2000.0  # [N/m]
