@@ -405,6 +405,8 @@ def _print_summary(m: dict, out_dir: Path) -> None:
     from rich.console import Console
     from rich.table import Table
 
+    from retarget.validate import servo_summary
+
     ok = "[green]SUCCESS[/green]" if m["success"] else "[red]FAILED[/red]"
     t = Table(title=f"{m['hand']} · {m['pair']} · {ok}", show_header=False)
     t.add_row(
@@ -433,13 +435,8 @@ def _print_summary(m: dict, out_dir: Path) -> None:
         f"{1000 * m['penetration_max_m']:.1f} / {1000 * m['sim_penetration_max_m']:.1f} mm",
     )
     t.add_row("finger–finger penetration max", f"{1000 * m['self_penetration_max_m']:.1f} mm")
-    if "finger_servo_err_mean_deg" in m:
-        t.add_row(
-            "servo tracking error mean (sim − command)",
-            f"wrist {1000 * m['wrist_pos_tracking_err_mean_m']:.1f} mm / "
-            f"{m['wrist_rot_tracking_err_mean_deg']:.1f}°; each finger's worst joint: "
-            + ", ".join(f"{k} {v:.1f}°" for k, v in m["finger_servo_err_mean_deg"].items()),
-        )
+    if (servo := servo_summary(m)) is not None:
+        t.add_row("servo tracking error mean (sim − command)", servo)
     forces = ", ".join(f"{k} {v:.2f}" for k, v in m["finger_force_mean_n"].items())
     t.add_row("mean contact force [N]", forces)
     if m.get("force_correlation_mean") is not None:

@@ -31,6 +31,19 @@ from retarget.scene import OBJECT_BODY, add_object, add_table
 log = logging.getLogger(__name__)
 
 
+def servo_summary(m: dict) -> str | None:
+    """One line of :meth:`ValidationResult.servo_metrics` (in a metrics dict ``m``) for the
+    terminal and the report; None when ``m`` has none."""
+    servo = m.get("finger_servo_err_mean_deg")
+    if not servo:
+        return None
+    return (
+        f"wrist {1000 * m['wrist_pos_tracking_err_mean_m']:.1f} mm / "
+        f"{m['wrist_rot_tracking_err_mean_deg']:.1f}°; each finger's worst joint: "
+        + ", ".join(f"{k} {v:.1f}°" for k, v in servo.items())
+    )
+
+
 @dataclass(frozen=True)
 class ValidateConfig:
     """Re-simulation settings."""

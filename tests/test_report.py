@@ -177,11 +177,12 @@ def test_metrics_table_units():
                 "backend": "pinocchio",
                 "finger_servo_err_mean_deg": {"th": 9.14, "ff": 1.0},
                 "wrist_pos_tracking_err_mean_m": 0.0008,
+                "wrist_rot_tracking_err_mean_deg": 0.26,
             }
         )
     )
     assert rows["servo tracking error mean (simulation − command)"] == (
-        "wrist 0.8 mm; each finger's worst joint: th 9.1°, ff 1.0°"
+        "wrist 0.8 mm / 0.3°; each finger's worst joint: th 9.1°, ff 1.0°"
     )
     assert rows["object position error max / mean"] == "7.1 / 2.0 cm"
     assert rows["keypoint error mean"] == "17.5 mm" and "no" in rows[next(iter(rows))]

@@ -25,7 +25,6 @@ from typing import Literal
 
 import numpy as np
 
-from dexcanvas_core.keypoints import FINGERS
 from dexcanvas_core.trajectory import CONTACT_PARTS, FORCE_GROUPS, Contacts, Trajectory, part_group
 from retarget.viz.errors import VizError
 
@@ -326,11 +325,7 @@ def robot_body_parts(hand, model) -> tuple[np.ndarray, np.ndarray]:
     """
     parts = hand.hand_parts(model)
     hand_nbody = hand.compile().nbody  # the hand's bodies come first in every scene
-    robot_to_human: dict[str, str] = {}
-    for human in FINGERS:
-        robot = hand.fingers.get(human)
-        if robot is not None and robot not in robot_to_human:
-            robot_to_human[robot] = human
+    robot_to_human = hand.robot_to_human
     has_collision = np.zeros(model.nbody, bool)
     for g in range(model.ngeom):
         if model.geom_contype[g] or model.geom_conaffinity[g]:

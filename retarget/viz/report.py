@@ -135,8 +135,6 @@ def _section(run_dir: Path, cfg: ReportConfig) -> RunSection:
         )
     )
     if "finger_servo_err" in run.arrays:  # (runs written before it was recorded: none)
-        fingers = [f for f in hand.robot_fingers]
-        to_human = {r: h for h, r in hand.fingers.items() if r}
         sec.plots.append(
             (
                 "servo tracking error",
@@ -144,9 +142,9 @@ def _section(run_dir: Path, cfg: ReportConfig) -> RunSection:
                     plot_dir / f"servo{ext}",
                     t,
                     run.arrays["finger_servo_err"],
-                    fingers,
+                    hand.robot_fingers,
                     run.arrays["wrist_pos_tracking_err"],
-                    human_fingers=to_human,
+                    human_fingers=hand.robot_to_human,
                     title=title,
                 ),
             )
@@ -288,16 +286,10 @@ def metrics_rows(m: dict) -> list[tuple[str, str]]:
             f"{html.escape(str(m.get('uuid')))} ({html.escape(str(m.get('dataset')))})",
         ),
     ]
-    servo = m.get("finger_servo_err_mean_deg") or {}
-    if servo:
-        rows.append(
-            (
-                "servo tracking error mean (simulation − command)",
-                f"wrist {_fmt(m.get('wrist_pos_tracking_err_mean_m'), 1000, ' mm')}; each "
-                "finger's worst joint: "
-                + ", ".join(f"{html.escape(k)} {v:.1f}°" for k, v in servo.items()),
-            )
-        )
+    from retarget.validate import servo_summary
+
+    if (servo := servo_summary(m)) is not None:
+        rows.append(("servo tracking error mean (simulation − command)", html.escape(servo, False)))
     forces = m.get("finger_force_mean_n") or {}
     if forces:
         rows.append(
