@@ -548,6 +548,8 @@ class Retargeter:
         coupling = CouplingLimit.from_mjmodel(m)
         if coupling:
             self.limits.append(coupling)
+        self._coupling = coupling
+        self._servo_map = None  # (nq, nq) servoed joints → all (``_servo_follower_map``)
         # One mj_collision sweep per iterate finds the hand–object and hand–hand pairs within
         # their query distances, for both limits and the metrics (ContactSweep).
         # Hand geoms reach as far as the self pairs need, the object and table as far as the
@@ -1089,7 +1091,11 @@ class Retargeter:
         fingers = np.isfinite(fm["kp"])
         P = self.contacts.finger_point_array(q)[idx]
         Jall = self.kin.point_jacobians(tuple(pts[i][0] for i in idx), P)[:, :, : self.nq]
-        Jall[:, :, ~fingers] = 0.0  # the wrist and unservoed joints do not squeeze
+        # Over the servoed joints, each carrying the joints its linkage drives (a coupled
+        # distal joint moves with its servo, and its share of the load is the servo's: τ =
+        # (J C)ᵀ f); the wrist has no column (it does not squeeze).
+        C = self._servo_follower_map(q)
+        Jall = Jall @ C
         J = list(Jall)
         com = fm["p_obj"][t] + fm["R_obj"][t] @ fm["com_local"]
         dist = distribute(
@@ -1113,14 +1119,35 @@ class Retargeter:
         if gap.any():
             delta = -(gap[:, None] * normals[idx]).reshape(-1)
             dq = dq + _damped_step(Jall.reshape(-1, self.nq), delta)
-        return self._within_limits(q + dq) - q
+        return self._within_limits(q + C @ dq) - q
+
+    def _servo_follower_map(self, q: np.ndarray) -> np.ndarray:
+        """``(nq, nq)`` map from a displacement of the servoed finger joints to every joint's,
+        the unservoed finger joints following through the model's couplings
+        (``CouplingLimit.follower_map``; Ability's and Inspire's distal joints, SVH's 11 mimic
+        joints, Shadow's distal J0): zero columns for the wrist and the followers. Cached when
+        the couplings are linear (every hand here)."""
+        if self._servo_map is not None:
+            return self._servo_map
+        servoed = np.isfinite(self._servo_gains()[0])
+        followers = ~servoed
+        followers[:6] = False
+        if self._coupling:
+            C = self._coupling.follower_map(q, followers)
+        else:
+            C = np.eye(self.nq)
+        C[:, ~servoed] = 0.0
+        if not self._coupling or self._coupling.linear:
+            self._servo_map = C
+        return C
 
     def _squeeze(self, q: np.ndarray, active: np.ndarray, normals: np.ndarray) -> np.ndarray:
         """``grip="depth"``: joint offset pressing each contacting finger ``squeeze_depth``
         into the surface.
 
-        ``Δq = Jᵀ (J Jᵀ + λ I)⁻¹ δ`` with ``δ = −depth · n`` per active contact and ``J`` the
-        contact points' Jacobians restricted to the finger joints (the wrist does not move).
+        ``Δq = C (J C)ᵀ (J C (J C)ᵀ + λ I)⁻¹ δ`` with ``δ = −depth · n`` per active contact,
+        ``J`` the contact points' Jacobians and ``C`` the servoed finger joints' follower map
+        (the wrist does not move; coupled joints follow their servo).
         """
         dq = np.zeros(self.nq)
         if self.contacts is None or self.cfg.squeeze_depth <= 0 or not active.any():
@@ -1130,10 +1157,10 @@ class Retargeter:
         idx = np.flatnonzero(active)
         J = self.kin.point_jacobians(
             tuple(pts[i][0] for i in idx), self.contacts.finger_point_array(q)[idx]
-        ).reshape(-1, self.nq)
-        J[:, :6] = 0.0
+        )[:, :, : self.nq].reshape(-1, self.nq)
+        C = self._servo_follower_map(q)  # the servos move; coupled joints follow them
         delta = np.concatenate([-self.cfg.squeeze_depth * normals[i] for i in idx])
-        dq = _damped_step(J, delta)
+        dq = C @ _damped_step(J @ C, delta)
         return self._within_limits(q + dq) - q
 
     def _objectives(self):

@@ -131,6 +131,68 @@ def test_squeeze_offsets_press_with_the_intended_force():
     assert out[1] == 0.0 and out[2] == 0.0 and out[0] == pytest.approx(3.0)
 
 
+def _coupled_finger_pressing_a_fixed_box():
+    """A two-joint finger with one servo, on the proximal joint; the distal joint is tied to it
+    by a linkage, ``j2 = 1.5 j1`` (Ability's and Inspire's fingers, SVH's mimic joints). Only
+    the sphere at its tip rests on a fixed box."""
+    spec = mujoco.MjSpec()
+    spec.compiler.degree = False
+    spec.option.timestep = 0.002
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    links = []
+    parent, pos = spec.worldbody, [0, 0, 0.1]
+    for name in ("j1", "j2"):
+        b = parent.add_body(name=f"l{name[1]}", pos=pos, gravcomp=1)
+        b.add_joint(name=name, type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0], damping=0.05,
+                    armature=1e-4)  # fmt: skip
+        b.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0.04, 0, 0],
+                   size=[0.005, 0, 0], density=1000)  # fmt: skip
+        links.append(b)
+        parent, pos = b, [0.05, 0, 0]
+    links[1].add_geom(name="tip", type=mujoco.mjtGeom.mjGEOM_SPHERE, pos=[0.04, 0, 0],
+                      size=[0.008, 0, 0], density=1000)  # fmt: skip
+    spec.worldbody.add_geom(name="box", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.05, 0.05, 0.02],
+                            pos=[0.09, 0, 0.1 - 0.008 - 0.02])  # fmt: skip
+    eq = spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1="j2", name2="j1")
+    eq.data[:5] = [0.0, 1.5, 0.0, 0.0, 0.0]
+    eq.solref = [0.005, 1.0]  # as the hands' linkages (retarget.hands.base)
+    a = spec.add_actuator(name="j1", target="j1", trntype=mujoco.mjtTrn.mjTRN_JOINT)
+    a.set_to_position(kp=5.0, dampratio=1.0)
+    for g in spec.geoms:
+        g.solref = [0.005, 1.0]
+    return spec.compile()
+
+
+def test_a_coupled_joint_carries_its_share_of_the_squeeze():
+    """A servo that drives a linkage: Δq = K⁻¹(J C)ᵀf, with ``C`` the coupling's follower map
+    (``CouplingLimit.follower_map``), presses with the intended force within 10 %; the servo's
+    own Jacobian column alone (the linkage's joint left out) presses with less than 75 % of it."""
+    from retarget.limits.coupling import CouplingLimit
+
+    m = _coupled_finger_pressing_a_fixed_box()
+    d = mujoco.MjData(m)
+    kp = np.array([5.0, np.inf])
+    C = CouplingLimit.from_mjmodel(m).follower_map(np.zeros(2), np.array([False, True]))
+    np.testing.assert_allclose(C, [[1.0, 0.0], [1.5, 0.0]], atol=1e-12)
+
+    def pressed(jac: np.ndarray, F: float) -> float:
+        mujoco.mj_resetData(m, d)
+        d.ctrl[:] = squeeze_offsets([jac], np.array([[0.0, 0.0, -F]]), kp)[:1]
+        for _ in range(2000):
+            mujoco.mj_step(m, d)
+        assert d.ncon >= 1
+        return sum(_normal(m, d, i) for i in range(d.ncon))
+
+    mujoco.mj_forward(m, d)
+    jacp = np.zeros((3, m.nv))
+    bottom = d.geom_xpos[m.geom("tip").id] - [0.0, 0.0, 0.008]  # the contact point
+    mujoco.mj_jac(m, d, jacp, None, bottom, m.body("l2").id)
+    for F in (1.0, 3.0):
+        assert pressed(jacp @ C, F) == pytest.approx(F, rel=0.10)
+        assert pressed(jacp, F) < 0.75 * F
+
+
 def test_soft_default_contacts_press_less_than_commanded():
     """Why force matching stiffens contacts: at MuJoCo's default solref (0.02 s) the finger sinks
     into the box and the servo loses part of its deflection."""

@@ -256,6 +256,53 @@ def test_coupling_rows_linearise_the_residual(hand_name):
         np.testing.assert_allclose(A, J, atol=1e-8)
 
 
+@pytest.mark.parametrize("hand_name", ["shadow", "svh", "inspire", "ability", "panda"])
+def test_follower_map_moves_coupled_joints_with_their_servos(hand_name):
+    """``CouplingLimit.follower_map``: a displacement ``C Δq`` of the servoed joints keeps every
+    coupling (equality rows, Shadow's narrow J0–J1 tendons) to first order (residual change
+    O(ε²) by central differences), is the identity on the servoed joints and has zero columns
+    for the followers."""
+    from retarget.hands import get_hand
+
+    m = get_hand(hand_name).build_spec().compile()
+    coupling = CouplingLimit.from_mjmodel(m)
+    servoed = np.zeros(m.nv, bool)
+    for a in range(m.nu):
+        servoed[m.jnt_dofadr[m.actuator_trnid[a, 0]]] = True
+    followers = ~servoed
+    assert followers.any(), hand_name
+    narrow = np.array(
+        [a for a, lo, hi in coupling.ranges if np.count_nonzero(a) > 1 and hi - lo <= 2e-3]
+    ).reshape(-1, m.nv)
+    A1 = np.array([a1 for a1, _, _ in coupling.rows]).reshape(-1, m.nv)
+    A2 = np.array([a2 for _, a2, _ in coupling.rows]).reshape(-1, m.nv)
+    P = np.array([c for _, _, c in coupling.rows]).reshape(-1, 5)
+
+    def residual(q):
+        eq = A1 @ q - np.array([np.polyval(c[::-1], x) for c, x in zip(P, A2 @ q, strict=True)])
+        return np.concatenate([eq, narrow @ q])
+
+    rng = np.random.default_rng(5)
+    q = rng.uniform(-0.3, 0.6, m.nv)
+    C = coupling.follower_map(q, followers)
+    np.testing.assert_array_equal(C[:, followers], 0.0)
+    np.testing.assert_allclose(C[np.ix_(servoed, servoed)], np.eye(servoed.sum()))
+    moved = np.abs(C[np.ix_(followers, servoed)]).sum(axis=1) > 0
+    assert moved.sum() >= 1  # some follower is driven
+    for _ in range(3):
+        dq = C @ rng.normal(size=m.nv)
+        eps = 1e-4
+        d = (residual(q + eps * dq) - residual(q - eps * dq)) / (2 * eps)
+        np.testing.assert_allclose(d, 0.0, atol=1e-6)
+    # A nonlinear linkage: the map's slope is p'(q) at the configuration.
+    mc = mujoco.MjModel.from_xml_string(COUPLED)
+    cc = CouplingLimit.from_mjmodel(mc)
+    assert not cc.linear and coupling.linear
+    for a in (0.0, 0.5):
+        Cc = cc.follower_map(np.array([a, 0.0]), np.array([False, True]))
+        assert Cc[1, 0] == pytest.approx(0.7 + 0.2 * a) and Cc[0, 0] == 1.0
+
+
 TENDON_COUPLED = """
 <mujoco>
   <worldbody>

@@ -67,6 +67,9 @@ class CouplingLimit(Limit):
             C = np.array([c for _, _, c in rows])  # (k, 5)
             self._C = C
             self._dC = C[:, 1:] * np.arange(1, 5)  # p' coefficients (k, 4)
+        self.linear = not self.rows or not self._dC[:, 1:].any()
+        """Every equality is linear (``p'`` constant): :meth:`follower_map` does not depend
+        on ``q``."""
 
     def __bool__(self) -> bool:
         return bool(self.rows or self.ranges)
@@ -127,6 +130,39 @@ class CouplingLimit(Limit):
         p = np.add.reduce(self._C * powers, axis=1)
         dp = np.add.reduce(self._dC * powers[:, :4], axis=1)
         return A1 - dp[:, None] * A2, p - s1
+
+    def follower_map(self, q: np.ndarray, followers: np.ndarray) -> np.ndarray:
+        """``(nv, nv)`` matrix ``C``: the joint displacement ``C Δq`` that a displacement ``Δq``
+        of the other joints causes when the ``followers`` (bool ``(nv,)``, e.g. joints without
+        a servo) move only through the couplings, linearised at ``q``.
+
+        The couplings (equality rows, and the limited fixed tendons no wider than 2 mm that
+        tie joints together, as :func:`retarget.hands.base.coupling_tendons`) read
+        ``A_F Δq_F + A_O Δq_O = 0``, so ``Δq_F = −A_F⁺ A_O Δq_O``; ``C`` is the identity on the
+        other joints and has zero columns for the followers. A follower no coupling names
+        (a free passive joint) is not moved. Used where a servo's torque or offset must account
+        for the joints it drives through a linkage: ``τ = (J C)ᵀ f``."""
+        nv = q.shape[0]
+        F = np.asarray(followers, bool)[:nv]
+        rows = []
+        if self.rows:
+            A1, A2 = self._A1[:, :nv], self._A2[:, :nv]
+            s2 = A2 @ q
+            dp = np.add.reduce(self._dC * (s2[:, None] ** np.arange(4)), axis=1)
+            rows.append(A1 - dp[:, None] * A2)
+        narrow = [
+            a[:nv] for a, lo, hi in self.ranges if np.count_nonzero(a) > 1 and hi - lo <= 2e-3
+        ]
+        if narrow:
+            rows.append(np.array(narrow))
+        C = np.diag((~F).astype(np.float64))
+        if not rows or not F.any():
+            return C
+        A = np.concatenate(rows)
+        A = A[np.abs(A[:, F]).sum(axis=1) > 0]  # the rows that tie a follower
+        if A.shape[0]:
+            C[np.ix_(F, ~F)] = -np.linalg.pinv(A[:, F]) @ A[:, ~F]
+        return C
 
 
 def _fixed_tendon_coefficients(m: mujoco.MjModel, tendon: int) -> np.ndarray:
