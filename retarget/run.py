@@ -135,9 +135,12 @@ def _human_forces(traj, pair, prog):
 
 
 def _corr(a: np.ndarray, b: np.ndarray) -> float | None:
-    """Pearson correlation, ``None`` when either side is constant."""
-    if a.std() <= 0 or b.std() <= 0:
-        return None
+    """Pearson correlation; 0 when one side is constant and the other is not (a finger that
+    never presses while the other side's does reproduces none of its profile: leaving it out
+    would flatter the mean), ``None`` when both are constant."""
+    sa, sb = a.std() > 0, b.std() > 0
+    if not (sa and sb):
+        return 0.0 if sa or sb else None
     return float(np.corrcoef(a, b)[0, 1])
 
 

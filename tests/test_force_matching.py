@@ -279,6 +279,19 @@ def test_retargeter_matches_the_human_object_force(human_with_forces):
     plan_err = np.linalg.norm(out.human_force[:90].sum(1) - human[:90], axis=1)
     sel = touching[:90] & lifted
     assert m["object_force_error_mean_n"] == pytest.approx(plan_err[sel].mean(), rel=1e-5)
+    # A robot finger that never presses where the human's did reproduces none of its
+    # profile: correlation 0 (counted in the mean), not left out.
+    f0 = next(iter(pressing))
+    silent = planned.copy()
+    silent[:, fingers.index(hand.fingers[f0])] = 0.0
+    m0 = refined_force_metrics(
+        out, SimpleNamespace(finger_force_world=silent, fingers=fingers), traj, r
+    )
+    v0 = m0["force_per_finger"][f0]
+    assert v0["profile_correlation"] == 0.0 and v0["correlation"] == 0.0
+    assert v0["relative_magnitude_error"] == pytest.approx(1.0)
+    n = len(pressing)
+    assert m0["force_profile_correlation_mean"] == pytest.approx((n - 1) / n)
     too_short = SimpleNamespace(finger_force_world=planned[:2], fingers=fingers)
     assert refined_force_metrics(out, too_short, traj, r) is None
 
