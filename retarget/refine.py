@@ -353,22 +353,33 @@ def _add_closing(basis, m, robot, tip_sites, finger_acts, p_o, close_m: float) -
     on the frames where its human finger touches: damped least squares over the finger's
     servoed joints (``finger_acts[i]``), ``Δq = Jᵀ (J Jᵀ + λ I)⁻¹ δ`` with ``λ = 10⁻⁴ m²`` (a
     finger's ``J Jᵀ`` is ~(5 cm)² along its reach; near a singular posture the step stays short
-    instead of large). One kinematics pass per frame serves every finger."""
+    instead of large). ``J`` is the fingertip's Jacobian through the joints the servos drive,
+    their coupled joints included (``CouplingLimit.follower_map``, as the retargeter's
+    squeeze). One kinematics pass per frame serves every finger."""
+    from retarget.limits.coupling import CouplingLimit
+
     d = mujoco.MjData(m)
     jacp = np.zeros((3, m.nv))
     nq = robot.q.shape[1]
+    coupling = CouplingLimit.from_mjmodel(m)
+    followers = np.zeros(m.nv, bool)
+    followers[:nq] = True
+    followers[[int(m.jnt_dofadr[m.actuator_trnid[a, 0]]) for a in range(m.nu)]] = False
     sites = [m.site(s).id for s in tip_sites]
     dofs = [[int(m.jnt_dofadr[m.actuator_trnid[a, 0]]) for a in acts] for acts in finger_acts]
     touching = robot.contact_active
+    C = coupling.follower_map(np.zeros(m.nv), followers) if coupling else np.eye(m.nv)
     for t in np.flatnonzero(touching.any(axis=1)):
         d.qpos[:nq] = robot.q[t]
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)  # (the Jacobians need cdof)
+        if coupling and not coupling.linear:
+            C = coupling.follower_map(np.r_[robot.q[t], np.zeros(m.nv - nq)], followers)
         for i in np.flatnonzero(touching[t]):
             if not finger_acts[i]:
                 continue
             mujoco.mj_jacSite(m, d, jacp, None, sites[i])
-            J = jacp[:, dofs[i]]
+            J = (jacp @ C)[:, dofs[i]]
             u = p_o[t] - d.site_xpos[sites[i]]
             u *= close_m / max(float(np.linalg.norm(u)), 1e-9)
             basis[t, finger_acts[i], 6 + i] += J.T @ np.linalg.solve(J @ J.T + 1e-4 * np.eye(3), u)
