@@ -42,7 +42,9 @@ Measured per run (``Resimulator``: the hand's own position servos, object free o
   of the human's and the re-simulated robot's contact-force magnitudes, averaged over fingers
   (runs with human forces only; the human side is (d)'s ``human_force``), two ways: over the
   whole demonstration (the force *profile*, on/off timing included) and over only the frames
-  where either finger touches (how the force varies while in contact);
+  where either finger touches (how the force varies while in contact); over the fingers the
+  human loaded (> 0.05 N on more than 2 frames), a robot finger that never presses there
+  scoring 0;
 * object force error — mean over frames where the human touches of ‖Σ robot contact forces −
   Σ human contact forces‖ [N] (the force part of the hand's wrench on the object; the
   re-simulation reports no contact points, so no torque), also as % of the object's weight m·g;
@@ -1192,8 +1194,9 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
             "success": "Resimulator strict rule (no frame with object error > 5 cm)",
             "success_loose": "mean object error < 10 cm and < 0.5 rad",
             "force_correlation_mean": "retarget.run.force_metrics: mean over corresponding "
-            "fingers of the correlation of human and re-simulated robot contact-force magnitude "
-            "profiles (frames where either exceeds 0.05 N)",
+            "fingers the human loaded (> 0.05 N on more than 2 frames) of the correlation of "
+            "human and re-simulated robot contact-force magnitude profiles (frames where either "
+            "exceeds 0.05 N); 0 for a robot finger that never presses",
             "force_profile_correlation_mean": "the same correlation over every frame of the "
             "demonstration (the force profile, contact on/off timing included)",
             "object_force_error_mean_n": "mean over frames where the human touches of |sum of "

@@ -135,8 +135,8 @@ def _human_forces(traj, pair, prog):
 
 
 def _corr(a: np.ndarray, b: np.ndarray) -> float | None:
-    """Pearson correlation; 0 when one side is constant and the other is not (a finger that
-    never presses while the other side's does reproduces none of its profile: leaving it out
+    """Pearson correlation; 0 when one side is constant and the other is not (a robot finger
+    that never presses where the human's does reproduces none of its profile: leaving it out
     would flatter the mean), ``None`` when both are constant."""
     sa, sb = a.std() > 0, b.std() > 0
     if not (sa and sb):
@@ -153,7 +153,12 @@ def force_metrics(robot, sim, human, retargeter) -> dict:
     the human hand's) over frames where the human holds the object off the table (and, for
     reference, over all contact frames); contact precision/recall (robot finger in contact vs
     human finger in contact); the share of frames whose required force the QP could produce
-    (shortfall below 10 % of it or 0.05 N)."""
+    (shortfall below 10 % of it or 0.05 N).
+
+    The correlations and the magnitude error cover the fingers the human loaded (above 0.05 N
+    on more than 2 frames); a robot finger that never presses there scores 0. A finger the
+    human never loaded has no profile to match (``None``): the robot pressing with it counts
+    against ``contact_precision`` instead."""
     from dexcanvas_core.trajectory import FORCE_GROUPS
 
     H = np.linalg.norm(robot.human_force, axis=2)  # (T, F) per human finger the robot maps
@@ -164,11 +169,12 @@ def force_metrics(robot, sim, human, retargeter) -> dict:
     for i, f in enumerate(retargeter.tip_human):
         h, r = H[:, i], R[:, i]
         on = (h > 0.05) | (r > 0.05)
-        held = h > 0.05  # relative error only where the human finger carries force
-        rel = float(np.abs(r[held] - h[held]).sum() / h[held].sum()) if held.sum() > 2 else None
+        held = h > 0.05  # where the human finger carries force
+        used = held.sum() > 2
+        rel = float(np.abs(r[held] - h[held]).sum() / h[held].sum()) if used else None
         per[f] = {
-            "correlation": _corr(h[on], r[on]) if on.sum() > 2 else None,
-            "profile_correlation": _corr(h, r) if on.sum() > 2 else None,
+            "correlation": _corr(h[on], r[on]) if used else None,
+            "profile_correlation": _corr(h, r) if used else None,
             "relative_magnitude_error": rel,
         }
     human_total = human.contacts.finger_totals()[:, : len(FORCE_GROUPS)].sum(axis=1)

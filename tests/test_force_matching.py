@@ -292,6 +292,18 @@ def test_retargeter_matches_the_human_object_force(human_with_forces):
     assert v0["relative_magnitude_error"] == pytest.approx(1.0)
     n = len(pressing)
     assert m0["force_profile_correlation_mean"] == pytest.approx((n - 1) / n)
+    # A robot finger pressing where the human's never did has no human profile to match:
+    # no correlation, but the contact precision says it.
+    idle = [f for f, v in m["force_per_finger"].items() if v["relative_magnitude_error"] is None]
+    assert idle, m["force_per_finger"]
+    extra = planned.copy()
+    extra[:, fingers.index(hand.fingers[idle[0]]), 2] = np.linspace(0.0, 2.0, 90)
+    m1 = refined_force_metrics(
+        out, SimpleNamespace(finger_force_world=extra, fingers=fingers), traj, r
+    )
+    assert m1["force_per_finger"][idle[0]]["profile_correlation"] is None
+    assert m1["force_profile_correlation_mean"] == pytest.approx(1.0)
+    assert m1["contact_precision"] < m["contact_precision"]
     too_short = SimpleNamespace(finger_force_world=planned[:2], fingers=fingers)
     assert refined_force_metrics(out, too_short, traj, r) is None
 
