@@ -1114,8 +1114,11 @@ class Retargeter:
         # K⁻¹Jᵀf presses from the surface: a finger the kinematic solution leaves short of it
         # (non-penetration margin, contact error) first closes that gap, else a light force
         # is spent in the air (Allegro on cube2h/tripod: 3.6 mm mean contact error, 0.2 N
-        # reached instead of the human's ~2 N, the cube dropped)
-        gap = np.maximum(self.contacts.finger_distances(q)[idx], 0.0)
+        # reached instead of the human's ~2 N, the cube dropped); one the solution leaves
+        # inside it (up to the 2 mm penetration margin) backs out to it, else it presses that
+        # depth's servo force on top of the plan's (k·d with k = kp/L², e.g. 1.5 N for
+        # Allegro's 10 N·m/rad at a 0.1 m lever and 1.5 mm)
+        gap = self.contacts.finger_distances(q)[idx]
         if gap.any():
             delta = -(gap[:, None] * normals[idx]).reshape(-1)
             dq = dq + _damped_step(Jall.reshape(-1, self.nq), delta)

@@ -78,3 +78,51 @@ def test_depth_grip_still_available_and_validated():
         RetargetConfig(grip="hard").validate()
     with pytest.raises(RetargetError, match="grip_force_n"):
         RetargetConfig(grip_force_n=-1.0).validate()
+
+
+def test_the_command_presses_from_the_surface_not_from_the_penetration(lifted_run):
+    """A pressed finger that the kinematic solution leaves inside the object (within its
+    penetration margin) is commanded back onto the surface before its force offset: asked for
+    a negligible force, its contact point moves out along the normal by the depth (else the
+    servo would press the depth's stiffness force on top of the plan's)."""
+    import mujoco
+
+    from dexcanvas_core.rotations import aa_to_quat_wxyz
+
+    traj, _, rt, r = lifted_run
+    tg = rt.human_targets(traj)
+
+    quat = aa_to_quat_wxyz(traj.object.rot_aa)
+    found = None
+    for t in np.flatnonzero(tg["contact_active"].any(axis=1)):
+        rt.scene.set_object_pose(traj.object.pos[t], quat_wxyz=quat[t])
+        rt.contacts.set_contacts(
+            tg["contact_active"][t], tg["contact_points"][t], tg["contact_part"][t]
+        )
+        d = rt.contacts.finger_distances(r.q[t])
+        deep = np.flatnonzero(tg["contact_active"][t] & (d < -5e-4))
+        if deep.size:
+            found = t, int(deep[0]), float(d[deep[0]])
+            break
+    assert found is not None, "no contact frame with a finger inside the object"
+    t, i, depth = found
+    fm = rt._grip_targets(traj)
+    fm["mode"] = "human"
+    n = tg["contact_normals"][t, i]
+    fm["human_force"] = np.zeros((traj.num_frames, len(rt.tip_sites), 3))
+    fm["human_force"][t, i] = -0.002 * n  # pressing, negligibly
+    fm["wrench"] = np.zeros_like(fm["wrench"])
+    dq = rt._force_squeeze(r.q[t], t, tg, fm)
+    assert np.abs(dq).max() > 0
+    p0 = rt.contacts.finger_point_array(r.q[t])[i].copy()
+    # the same body point at the command
+    body = rt.contacts.finger_points(r.q[t])[i][0]
+    m, data = rt.scene.model, rt.scene.data
+    bid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, body)
+    data.qpos[: rt.nq] = r.q[t]
+    mujoco.mj_kinematics(m, data)
+    local = data.xmat[bid].reshape(3, 3).T @ (p0 - data.xpos[bid])
+    data.qpos[: rt.nq] = r.q[t] + dq
+    mujoco.mj_kinematics(m, data)
+    p1 = data.xpos[bid] + data.xmat[bid].reshape(3, 3) @ local
+    assert (p1 - p0) @ n == pytest.approx(-depth, rel=0.2)
