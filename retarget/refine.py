@@ -356,30 +356,27 @@ def _add_closing(basis, m, robot, tip_sites, finger_acts, p_o, close_m: float) -
     instead of large). ``J`` is the fingertip's Jacobian through the joints the servos drive,
     their coupled joints included (``CouplingLimit.follower_map``, as the retargeter's
     squeeze). One kinematics pass per frame serves every finger."""
-    from retarget.limits.coupling import CouplingLimit
+    from retarget.limits.coupling import CouplingLimit, servo_follower_map
 
     d = mujoco.MjData(m)
     jacp = np.zeros((3, m.nv))
     nq = robot.q.shape[1]
-    coupling = CouplingLimit.from_mjmodel(m)
-    followers = np.zeros(m.nv, bool)
-    followers[:nq] = True
-    followers[[int(m.jnt_dofadr[m.actuator_trnid[a, 0]]) for a in range(m.nu)]] = False
+    linear = CouplingLimit.from_mjmodel(m).linear
     sites = [m.site(s).id for s in tip_sites]
     dofs = [[int(m.jnt_dofadr[m.actuator_trnid[a, 0]]) for a in acts] for acts in finger_acts]
     touching = robot.contact_active
-    C = coupling.follower_map(np.zeros(m.nv), followers) if coupling else np.eye(m.nv)
+    C = servo_follower_map(m, robot.q[0], nq)
     for t in np.flatnonzero(touching.any(axis=1)):
         d.qpos[:nq] = robot.q[t]
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)  # (the Jacobians need cdof)
-        if coupling and not coupling.linear:
-            C = coupling.follower_map(np.r_[robot.q[t], np.zeros(m.nv - nq)], followers)
+        if not linear:
+            C = servo_follower_map(m, robot.q[t], nq)
         for i in np.flatnonzero(touching[t]):
             if not finger_acts[i]:
                 continue
             mujoco.mj_jacSite(m, d, jacp, None, sites[i])
-            J = (jacp @ C)[:, dofs[i]]
+            J = (jacp[:, :nq] @ C)[:, dofs[i]]
             u = p_o[t] - d.site_xpos[sites[i]]
             u *= close_m / max(float(np.linalg.norm(u)), 1e-9)
             basis[t, finger_acts[i], 6 + i] += J.T @ np.linalg.solve(J @ J.T + 1e-4 * np.eye(3), u)

@@ -51,6 +51,7 @@ from retarget.limits import (
     JointLimit,
     VelocityLimit,
 )
+from retarget.limits.coupling import servo_follower_map
 from retarget.objectives import (
     KeypointObjective,
     PostureObjective,
@@ -1132,15 +1133,9 @@ class Retargeter:
         the couplings are linear (every hand here)."""
         if self._servo_map is not None:
             return self._servo_map
-        servoed = np.isfinite(self._servo_gains()[0])
-        followers = ~servoed
-        followers[:6] = False
-        if self._coupling:
-            C = self._coupling.follower_map(q, followers)
-        else:
-            C = np.eye(self.nq)
-        C[:, ~servoed] = 0.0
-        if not self._coupling or self._coupling.linear:
+        C = servo_follower_map(self.scene.model, q, self.nq)
+        C[:, :6] = 0.0  # the wrist's servos do not squeeze
+        if self._coupling.linear:
             self._servo_map = C
         return C
 

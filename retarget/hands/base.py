@@ -829,15 +829,18 @@ def _attach_keeping_names(frame, body) -> None:
 
 def coupling_tendons(m) -> list[int]:
     """Ids of the fixed tendons that couple joints: over two or more joints, limited to a range
-    no wider than 2 mm (Shadow's ``T_*J1c``; its other two-joint tendons only bound the sum)."""
+    no wider than ``COUPLING_TENDON_WIDTH_M`` (2 mm; Shadow's ``T_*J1c``; its other two-joint
+    tendons only bound the sum)."""
     import mujoco
+
+    from retarget.limits.coupling import COUPLING_TENDON_WIDTH_M
 
     out = []
     for t in range(m.ntendon):
         adr, num = m.tendon_adr[t], m.tendon_num[t]
         fixed = all(m.wrap_type[adr + k] == mujoco.mjtWrap.mjWRAP_JOINT for k in range(num))
         lo, hi = m.tendon_range[t]
-        if fixed and num >= 2 and m.tendon_limited[t] and hi - lo <= 0.002:
+        if fixed and num >= 2 and m.tendon_limited[t] and hi - lo <= COUPLING_TENDON_WIDTH_M:
             out.append(t)
     return out
 

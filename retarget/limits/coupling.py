@@ -22,6 +22,10 @@ import numpy as np
 from retarget.limits.base import Limit
 from retarget.state import RobotState
 
+COUPLING_TENDON_WIDTH_M = 2e-3
+"""A limited fixed tendon over two or more joints whose range is at most this wide couples
+them (Shadow's ``T_*J1c``, ±1 mm); a wider one only bounds their combination."""
+
 
 class CouplingLimit(Limit):
     """Equality rows ``a₁ᵀΔq − p'(s₂) a₂ᵀΔq = −(s₁ − p(s₂))`` with ``sᵢ = aᵢᵀq``."""
@@ -53,6 +57,9 @@ class CouplingLimit(Limit):
             q_lo, q_hi = (lo / c, hi / c) if c > 0 else (hi / c, lo / c)
             self._box[0][j] = max(self._box[0][j], q_lo)
             self._box[1][j] = min(self._box[1][j], q_hi)
+        # The narrow multi-joint ranges tie joints as an equality would (``follower_map``).
+        ties = [a for a, lo, hi in multi if hi - lo <= COUPLING_TENDON_WIDTH_M]
+        self._ties = np.array(ties) if ties else None
         if multi:
             self._G = np.array([a for a, _, _ in multi])
             self._lo = np.array([lo for _, lo, _ in multi])
@@ -136,8 +143,8 @@ class CouplingLimit(Limit):
         of the other joints causes when the ``followers`` (bool ``(nv,)``, e.g. joints without
         a servo) move only through the couplings, linearised at ``q``.
 
-        The couplings (equality rows, and the limited fixed tendons no wider than 2 mm that
-        tie joints together, as :func:`retarget.hands.base.coupling_tendons`) read
+        The couplings (equality rows, and the limited fixed tendons no wider than
+        ``COUPLING_TENDON_WIDTH_M`` over two or more joints) read
         ``A_F Δq_F + A_O Δq_O = 0``, so ``Δq_F = −A_F⁺ A_O Δq_O``; ``C`` is the identity on the
         other joints and has zero columns for the followers. A follower no coupling names
         (a free passive joint) is not moved. Used where a servo's torque or offset must account
@@ -150,11 +157,8 @@ class CouplingLimit(Limit):
             s2 = A2 @ q
             dp = np.add.reduce(self._dC * (s2[:, None] ** np.arange(4)), axis=1)
             rows.append(A1 - dp[:, None] * A2)
-        narrow = [
-            a[:nv] for a, lo, hi in self.ranges if np.count_nonzero(a) > 1 and hi - lo <= 2e-3
-        ]
-        if narrow:
-            rows.append(np.array(narrow))
+        if self._ties is not None:
+            rows.append(self._ties[:, :nv])
         C = np.diag((~F).astype(np.float64))
         if not rows or not F.any():
             return C
@@ -163,6 +167,22 @@ class CouplingLimit(Limit):
         if A.shape[0]:
             C[np.ix_(F, ~F)] = -np.linalg.pinv(A[:, F]) @ A[:, ~F]
         return C
+
+
+def servo_follower_map(m: mujoco.MjModel, q: np.ndarray, hand_nv: int) -> np.ndarray:
+    """:meth:`CouplingLimit.follower_map` of ``m``'s couplings at ``q`` (``(hand_nv,)``) with
+    the hand joints no joint actuator moves as the followers: ``(hand_nv, hand_nv)``, how a
+    displacement of the servoed joints moves every hand joint (identity without couplings)."""
+    followers = np.ones(hand_nv, bool)
+    for a in range(m.nu):
+        if m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT:
+            dof = int(m.jnt_dofadr[m.actuator_trnid[a, 0]])
+            if dof < hand_nv:
+                followers[dof] = False
+    coupling = CouplingLimit.from_mjmodel(m)
+    if not coupling:
+        return np.diag((~followers).astype(np.float64))
+    return coupling.follower_map(np.asarray(q, dtype=np.float64)[:hand_nv], followers)
 
 
 def _fixed_tendon_coefficients(m: mujoco.MjModel, tendon: int) -> np.ndarray:
