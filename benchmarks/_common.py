@@ -126,8 +126,8 @@ def parse_override(text: str) -> tuple[str, object]:
         ) from None
 
 
-def config_overrides(pairs, config_cls) -> dict:
-    """``--set`` pairs ``[(name, value)]`` as keyword arguments of the dataclass
+def config_overrides(pairs, config_cls, option: str = "--set") -> dict:
+    """``option`` (``--set``) pairs ``[(name, value)]`` as keyword arguments of the dataclass
     ``config_cls``: an unknown name, or values its ``validate()`` refuses, exit with the
     message before any run."""
     import dataclasses
@@ -137,7 +137,7 @@ def config_overrides(pairs, config_cls) -> dict:
     bad = sorted(set(out) - fields)
     if bad:
         raise SystemExit(
-            f"--set: unknown {config_cls.__name__} field(s) {', '.join(bad)}; available: "
+            f"{option}: unknown {config_cls.__name__} field(s) {', '.join(bad)}; available: "
             f"{', '.join(sorted(fields))}"
         )
     try:
@@ -145,7 +145,7 @@ def config_overrides(pairs, config_cls) -> dict:
         if hasattr(cfg, "validate"):
             cfg.validate()
     except Exception as e:  # the config's own checks, e.g. a negative weight
-        raise SystemExit(f"--set: {config_cls.__name__} refuses {out}: {e}") from None
+        raise SystemExit(f"{option}: {config_cls.__name__} refuses {out}: {e}") from None
     return out
 
 

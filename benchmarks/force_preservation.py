@@ -184,6 +184,9 @@ class BenchConfig:
     overrides: dict = field(default_factory=dict)
     """``RetargetConfig`` fields changed for our variants (b)–(e) (``--set NAME=VALUE``); each
     variant's defining fields win (b: no contacts, no squeeze; d: force matching)."""
+    refine_overrides: dict = field(default_factory=dict)
+    """``RefineConfig`` fields changed for variant (e)'s refinement (``--refine-set
+    NAME=VALUE``)."""
     human_cache: Path | None = None
     """Directory of cached human simulations (``--human-cache``): a (demonstration, object,
     tracker) simulated once is read back on later runs instead of simulated again."""
@@ -317,7 +320,7 @@ def _hand_job(args) -> list[dict]:
     from retarget.run import FORCE_CONTACT_TIMECONST, refined_force_metrics
     from retarget.validate import Resimulator, ValidateConfig
 
-    base, traj, human, dex_wrist, computed, overrides = args
+    base, traj, human, dex_wrist, computed, overrides, refine_overrides = args
     rows = {v: {**base, "variant": v} for v in RUN_VARIANTS}
     for v in RUN_VARIANTS:
         if v not in computed:
@@ -405,8 +408,10 @@ def _hand_job(args) -> list[dict]:
 
             t0 = time.perf_counter()
             try:
-                rf = refine(hand, geom, human, robot_d, retargeters["d"].tip_sites,
-                            RefineConfig(contact_timeconst=FORCE_CONTACT_TIMECONST))  # fmt: skip
+                rcfg = RefineConfig(
+                    **{"contact_timeconst": FORCE_CONTACT_TIMECONST, **refine_overrides}
+                )
+                rf = refine(hand, geom, human, robot_d, retargeters["d"].tip_sites, rcfg)
                 rm = rf.metrics()
                 row.update(
                     success=rm["success"],
@@ -1033,7 +1038,15 @@ def run_jobs(cfg: BenchConfig, demos: list, plans: list, hands: list, console):
                     "uuid": traj.uuid,
                     "human_forces": res["trajectory"] is not None,
                 }
-                job = (base, traj, res["trajectory"], cfg.dex_wrist, computed, cfg.overrides)
+                job = (
+                    base,
+                    traj,
+                    res["trajectory"],
+                    cfg.dex_wrist,
+                    computed,
+                    cfg.overrides,
+                    cfg.refine_overrides,
+                )
                 pending[pool.submit(_hand_job, job)] = ("hand", i, k)
 
         for i, (_, traj) in enumerate(demos):
@@ -1093,6 +1106,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         f"tracker {cfg.human_tracker}; {cfg.workers} worker(s)"
         + (f"; variants {' '.join(cfg.variants)}" if cfg.variants != RUN_VARIANTS else "")
         + (f"; RetargetConfig {cfg.overrides}" if cfg.overrides else "")
+        + (f"; RefineConfig {cfg.refine_overrides}" if cfg.refine_overrides else "")
         + (f"; human cache {cfg.human_cache}" if cfg.human_cache is not None else "")
     )
 
@@ -1285,6 +1299,16 @@ def main(argv: list[str] | None = None) -> int:
         "w_contacts=100",
     )
     ap.add_argument(
+        "--refine-set",
+        dest="refine_overrides",
+        action="append",
+        type=parse_override,
+        default=[],
+        metavar="NAME=VALUE",
+        help="change a RefineConfig field of variant (e)'s refinement (repeatable), e.g. "
+        "--refine-set retries=2",
+    )
+    ap.add_argument(
         "--human-cache",
         type=Path,
         default=None,
@@ -1293,9 +1317,11 @@ def main(argv: list[str] | None = None) -> int:
         "retargeting skip the force pipeline",
     )
     a = ap.parse_args(argv)
+    from retarget.refine import RefineConfig
     from retarget.retargeter import RetargetConfig
 
     overrides = config_overrides(a.overrides, RetargetConfig)
+    refine_overrides = config_overrides(a.refine_overrides, RefineConfig, "--refine-set")
     logging.basicConfig(level=logging.ERROR)
     cfg = BenchConfig(
         hands=tuple(dict.fromkeys(a.hands)) if a.hands else None,
@@ -1311,6 +1337,7 @@ def main(argv: list[str] | None = None) -> int:
         dex_wrist=a.dex_wrist,
         variants=tuple(dict.fromkeys(a.variants)),
         overrides=overrides,
+        refine_overrides=refine_overrides,
         human_cache=a.human_cache,
     )
     run_benchmark(cfg)

@@ -597,6 +597,37 @@ def test_refinement_finger_action_closes_the_finger_on_the_object():
     assert checked >= 8
 
 
+def test_refinement_finger_action_scales_the_force_offset_by_the_offset_gain():
+    """``RefineConfig.offset_gain``: each finger's action column (without the closing step) is
+    that finger's servo offsets ``q_command − q`` times the gain, on its own actuators only;
+    the wrist's columns do not change with it."""
+    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.loaders.selection import load_demonstration
+    from retarget.hands import get_hand
+    from retarget.refine import RefineConfig, _tracking_env
+    from retarget.retargeter import Retargeter
+
+    demo = load_demonstration("cube2/tripod").slice(250, 300)
+    hand, geo = get_hand("allegro"), object_geometry("cube2")
+    rt = Retargeter(hand, geo)
+    robot = rt.retarget(demo)
+    envs = {
+        g: _tracking_env(
+            hand, geo, demo, robot, rt.tip_sites, RefineConfig(finger_close_m=0.0, offset_gain=g)
+        )
+        for g in (1.0, 2.5)
+    }
+    (env1, act_q, _), (env2, _, _) = envs[1.0], envs[2.5]
+    np.testing.assert_array_equal(env1.M[:, :, :6], env2.M[:, :, :6])
+    offsets = (robot.q_command - robot.q)[:, act_q]
+    fingers = env1.M[:, :, 6:]
+    assert np.abs(offsets[:, act_q >= 6]).max() > 1e-3  # the squeeze presses somewhere
+    # each finger actuator belongs to one finger's column, which carries its offset
+    np.testing.assert_allclose(fingers.sum(axis=2)[:, act_q >= 6], offsets[:, act_q >= 6])
+    assert ((fingers != 0).sum(axis=2) <= 1).all()
+    np.testing.assert_allclose(env2.M[:, :, 6:], 2.5 * fingers)
+
+
 def test_refinement_closing_step_moves_coupled_joints_with_their_servo():
     """On a hand whose distal joints follow their servo through a linkage (Ability), the
     closing step is the damped least-squares step on the fingertip's Jacobian through the
