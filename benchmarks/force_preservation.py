@@ -428,6 +428,8 @@ def _hand_job(args) -> list[dict]:
                     penetration_max_m=rows["d"].get("penetration_max_m"),
                     refined=True,
                     refine_s=rm["compute_s"],
+                    refine_attempts=rm["attempts"],
+                    refine_failed_at_frame=rm["failed_at_frame"],
                     finger_ctrl_deviation_mean_rad=rm["finger_ctrl_deviation_mean_rad"],
                     wrist_pos_deviation_mean_m=rm["wrist_pos_deviation_mean_m"],
                 )
