@@ -372,17 +372,17 @@ def _add_closing(basis, m, robot, tip_sites, finger_acts, p_o, close_m: float) -
     d = mujoco.MjData(m)
     jacp = np.zeros((3, m.nv))
     nq = robot.q.shape[1]
-    linear = CouplingLimit.from_mjmodel(m).linear
+    coupling = CouplingLimit.from_mjmodel(m)
     sites = [m.site(s).id for s in tip_sites]
     dofs = [[int(m.jnt_dofadr[m.actuator_trnid[a, 0]]) for a in acts] for acts in finger_acts]
     touching = robot.contact_active
-    C = servo_follower_map(m, robot.q[0], nq)
+    C = servo_follower_map(m, robot.q[0], nq, coupling)
     for t in np.flatnonzero(touching.any(axis=1)):
         d.qpos[:nq] = robot.q[t]
         mujoco.mj_kinematics(m, d)
         mujoco.mj_comPos(m, d)  # (the Jacobians need cdof)
-        if not linear:
-            C = servo_follower_map(m, robot.q[t], nq)
+        if not coupling.linear:
+            C = servo_follower_map(m, robot.q[t], nq, coupling)
         for i in np.flatnonzero(touching[t]):
             if not finger_acts[i]:
                 continue

@@ -1133,7 +1133,7 @@ class Retargeter:
         the couplings are linear (every hand here)."""
         if self._servo_map is not None:
             return self._servo_map
-        C = servo_follower_map(self.scene.model, q, self.nq)
+        C = servo_follower_map(self.scene.model, q, self.nq, self._coupling)
         C[:, :6] = 0.0  # the wrist's servos do not squeeze
         if self._coupling.linear:
             self._servo_map = C

@@ -169,17 +169,21 @@ class CouplingLimit(Limit):
         return C
 
 
-def servo_follower_map(m: mujoco.MjModel, q: np.ndarray, hand_nv: int) -> np.ndarray:
+def servo_follower_map(
+    m: mujoco.MjModel, q: np.ndarray, hand_nv: int, coupling: CouplingLimit | None = None
+) -> np.ndarray:
     """:meth:`CouplingLimit.follower_map` of ``m``'s couplings at ``q`` (``(hand_nv,)``) with
     the hand joints no joint actuator moves as the followers: ``(hand_nv, hand_nv)``, how a
-    displacement of the servoed joints moves every hand joint (identity without couplings)."""
+    displacement of the servoed joints moves every hand joint (identity without couplings).
+    ``coupling``: ``CouplingLimit.from_mjmodel(m)`` when the caller already has it."""
     followers = np.ones(hand_nv, bool)
     for a in range(m.nu):
         if m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT:
             dof = int(m.jnt_dofadr[m.actuator_trnid[a, 0]])
             if dof < hand_nv:
                 followers[dof] = False
-    coupling = CouplingLimit.from_mjmodel(m)
+    if coupling is None:
+        coupling = CouplingLimit.from_mjmodel(m)
     if not coupling:
         return np.diag((~followers).astype(np.float64))
     return coupling.follower_map(np.asarray(q, dtype=np.float64)[:hand_nv], followers)
