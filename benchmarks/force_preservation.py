@@ -44,7 +44,9 @@ Measured per run (``Resimulator``: the hand's own position servos, object free o
   whole demonstration (the force *profile*, on/off timing included) and over only the frames
   where either finger touches (how the force varies while in contact); over the fingers the
   human loaded (> 0.05 N on more than 2 frames), a robot finger that never presses there
-  scoring 0;
+  scoring 0; and the whole-demonstration one over the load-bearing fingers only (those
+  carrying at least ``retarget.run.LOAD_BEARING_SHARE`` of the hand's mean force: the
+  breakdown that separates the grip from light touches; the target is checked on all);
 * object force error — mean over frames where the human touches of ‖Σ robot contact forces −
   Σ human contact forces‖ [N] (the force part of the hand's wrench on the object; the
   re-simulation reports no contact points, so no torque), also as % of the object's weight m·g;
@@ -287,6 +289,7 @@ def _baseline(hand_name: str, wrist: str):
 
 FORCE_KEYS = (
     "force_per_finger", "force_correlation_mean", "force_profile_correlation_mean",
+    "force_correlation_mean_load_bearing", "force_profile_correlation_mean_load_bearing",
     "object_force_error_mean_n", "object_force_error_contact_frames_mean_n",
     "object_force_error_pct_weight", "contact_precision", "contact_recall",
 )  # fmt: skip
@@ -499,6 +502,9 @@ def aggregate(rows: list[dict]) -> dict:
         "force_correlation_mean_successful": _mean(won, "force_correlation_mean"),
         "force_profile_correlation_mean": _mean(ok, "force_profile_correlation_mean"),
         "force_profile_correlation_mean_successful": _mean(won, "force_profile_correlation_mean"),
+        "force_profile_correlation_mean_load_bearing_successful": _mean(
+            won, "force_profile_correlation_mean_load_bearing"
+        ),
         "object_force_error_mean_n": _mean(ok, "object_force_error_mean_n"),
         "object_force_error_pct_weight": _mean(ok, "object_force_error_pct_weight"),
         "object_force_error_mean_n_successful": _mean(won, "object_force_error_mean_n"),
@@ -736,14 +742,18 @@ def _coloured(text: str, met: bool | None) -> str:
 def variants_table(title: str, agg: dict):
     from rich.table import Table
 
+    from retarget.run import LOAD_BEARING_SHARE
+
     t = Table(
         title=title,
         caption="strict: no frame > 5 cm; loose: mean < 10 cm and < 0.5 rad (errors count as "
         "failures; (d) runs only where the force pipeline reproduced the demonstration). obj, "
         "rot: mean object errors. F corr (force correlation over the whole demonstration / over "
-        "contact frames; successful runs), F err (object force error, N and "
-        "% of m·g): runs with human forces, all / successful. pen: kinematic / re-simulation "
-        "max. (a)–(c) re-simulated with default contacts, (d) with stiff contacts.",
+        "contact frames / whole demonstration, load-bearing fingers only (≥ "
+        f"{100 * LOAD_BEARING_SHARE:.0f} % of the hand's force); successful runs), F err "
+        "(object force error, N and % of m·g): runs with human forces, all / successful. "
+        "pen: kinematic / re-simulation max. (a)–(c) re-simulated with default contacts, (d) "
+        "with stiff contacts.",
     )
     cols = ("variant", "runs", "strict %", "loose %", "obj cm", "rot °", "F corr", "F err N",
             "F err %mg", "pen mm", "ms/frame")  # fmt: skip
@@ -767,7 +777,8 @@ def variants_table(title: str, agg: dict):
             _f(a["object_pos_err_mean_m"], 100, ".2f"),
             _f(a["object_rot_err_mean_rad"], 180 / np.pi),
             f"{_f(a['force_profile_correlation_mean_successful'], fmt='.2f')} / "
-            f"{_f(a['force_correlation_mean_successful'], fmt='.2f')}",
+            f"{_f(a['force_correlation_mean_successful'], fmt='.2f')} / "
+            f"{_f(a['force_profile_correlation_mean_load_bearing_successful'], fmt='.2f')}",
             f"{_f(a['object_force_error_mean_n'], fmt='.2f')} / "
             f"{_f(a['object_force_error_mean_n_successful'], fmt='.2f')}",
             f"{_f(a['object_force_error_pct_weight'], 100, '.0f')} / "
@@ -1215,6 +1226,8 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
             "exceeds 0.05 N); 0 for a robot finger that never presses",
             "force_profile_correlation_mean": "the same correlation over every frame of the "
             "demonstration (the force profile, contact on/off timing included)",
+            "*_load_bearing": "the same means over the fingers whose mean human force is at "
+            "least retarget.run.LOAD_BEARING_SHARE of the mapped fingers' summed mean force",
             "object_force_error_mean_n": "mean over frames where the human touches of |sum of "
             "robot contact forces - sum of human contact forces| on the object (force part of "
             "the wrench; no torque: the re-simulation reports no contact points)",

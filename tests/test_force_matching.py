@@ -279,9 +279,17 @@ def test_retargeter_matches_the_human_object_force(human_with_forces):
     plan_err = np.linalg.norm(out.human_force[:90].sum(1) - human[:90], axis=1)
     sel = touching[:90] & lifted
     assert m["object_force_error_mean_n"] == pytest.approx(plan_err[sel].mean(), rel=1e-5)
+    # Load shares: each finger's mean human force over the mapped fingers' sum.
+    shares = {f: v["load_share"] for f, v in m["force_per_finger"].items()}
+    assert sum(shares.values()) == pytest.approx(1.0)
+    H90 = np.linalg.norm(out.human_force[:90], axis=2).mean(axis=0)
+    for i, f in enumerate(r.tip_human):
+        assert shares[f] == pytest.approx(H90[i] / H90.sum()), f
+    assert m["force_profile_correlation_mean_load_bearing"] == pytest.approx(1.0)
     # A robot finger that never presses where the human's did reproduces none of its
-    # profile: correlation 0 (counted in the mean), not left out.
-    f0 = next(iter(pressing))
+    # profile: correlation 0 (counted in the mean), not left out. The most loaded one also
+    # counts among the load-bearing fingers; the light touches do not.
+    f0 = max(pressing, key=shares.get)
     silent = planned.copy()
     silent[:, fingers.index(hand.fingers[f0])] = 0.0
     m0 = refined_force_metrics(
@@ -292,6 +300,13 @@ def test_retargeter_matches_the_human_object_force(human_with_forces):
     assert v0["relative_magnitude_error"] == pytest.approx(1.0)
     n = len(pressing)
     assert m0["force_profile_correlation_mean"] == pytest.approx((n - 1) / n)
+    from retarget.run import LOAD_BEARING_SHARE
+
+    nb = sum(1 for f in pressing if shares[f] >= LOAD_BEARING_SHARE)
+    assert 1 <= nb
+    assert m0["force_profile_correlation_mean_load_bearing"] == pytest.approx((nb - 1) / nb)
+    assert v0["robot_force_mean_n"] == 0.0
+    assert v0["human_force_mean_n"] == pytest.approx(H90[r.tip_human.index(f0)])
     # A robot finger pressing where the human's never did has no human profile to match:
     # no correlation, but the contact precision says it.
     idle = [f for f, v in m["force_per_finger"].items() if v["relative_magnitude_error"] is None]
@@ -366,6 +381,7 @@ def test_cli_run_forces_reports_force_preservation(human_with_forces, tmp_path):
     m = json.loads((out / "metrics.json").read_text())
     assert m["forces"] and m["human_force_pipeline"] is None  # forces came with the dataset
     for key in ("force_correlation_mean", "force_profile_correlation_mean",
+                "force_profile_correlation_mean_load_bearing",
                 "object_force_error_mean_n", "contact_precision",
                 "contact_recall", "wrench_feasible_fraction"):  # fmt: skip
         assert m[key] is not None and np.isfinite(m[key])
