@@ -387,6 +387,31 @@ def test_cli_run_forces_reports_force_preservation(human_with_forces, tmp_path):
         assert m[key] is not None and np.isfinite(m[key])
     assert set(m["force_per_finger"]) == {"thumb", "index", "middle", "ring"}
     assert 0.0 <= m["contact_recall"] <= 1.0
+    # The report's force plot adds the plan: the force QP's force per mapped finger.
+    from dexcanvas_core.trajectory import FORCE_GROUPS
+    from retarget.hands import get_hand
+    from retarget.viz import plots
+    from retarget.viz.data import load_run
+    from retarget.viz.report import force_notes
+
+    run = load_run(out)
+    f = plots.finger_forces(run.arrays, get_hand("allegro"), None)
+    P = np.linalg.norm(run.arrays["robot_force"], axis=-1)
+    for i, name in enumerate(("thumb", "index", "middle", "ring")):
+        np.testing.assert_allclose(f["plan"][:, FORCE_GROUPS.index(name)], P[:, i])
+    assert np.isnan(f["plan"][:, FORCE_GROUPS.index("pinky")]).all()
+    assert np.isnan(f["plan"][:, FORCE_GROUPS.index("palm")]).all()
+    # without the demonstration's records, the human side is the forces the run matched
+    Hm = np.linalg.norm(run.arrays["human_force"], axis=-1)
+    for i, name in enumerate(("thumb", "index", "middle", "ring")):
+        np.testing.assert_allclose(f["human"][:, FORCE_GROUPS.index(name)], Hm[:, i])
+    assert np.isnan(f["human"][:, FORCE_GROUPS.index("palm")]).all()
+    notes = force_notes(m)
+    assert notes and set(notes) <= set(m["force_per_finger"])
+    for name, text in notes.items():
+        assert f"{m['force_per_finger'][name]['profile_correlation']:.2f}" in text
+    assert main(["report", str(out), "--no-snapshots", "--renderer", "mujoco"]) == 0
+    assert "the force matching&#x27;s plan" in (out / "report.html").read_text()
 
 
 def test_refinement_rescues_a_failing_replay_and_reports_its_cost():

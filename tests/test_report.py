@@ -136,6 +136,11 @@ def test_plots_write_png_and_svg(tmp_path):
         plots.plot_object_error(tmp_path / "e.png", t, err[:-1], err)
     with pytest.raises(VizError, match=r"\(T, 6\)"):
         plots.plot_finger_forces(tmp_path / "f.png", t, forces[:, :5])
+    with pytest.raises(VizError, match="planned forces"):
+        plots.plot_finger_forces(tmp_path / "f.png", t, forces, plan=forces[:, :5])
+    notes = {"thumb": "profile correlation 0.90"}
+    out = plots.plot_finger_forces(tmp_path / "p.png", t, forces, forces, plan=forces, notes=notes)
+    assert out.stat().st_size > 5000
     servo = np.radians(np.abs(np.sin(t))[:, None] * [1.0, 5.0])
     out = plots.plot_servo_tracking(
         tmp_path / "s.png", t, servo, ["th", "ff"], 1e-3 * t, human_fingers={"th": "thumb"}

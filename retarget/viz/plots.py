@@ -1,7 +1,8 @@
 """Plots of a run (matplotlib, Agg backend; PNG or SVG by the file's suffix).
 
-* :func:`plot_finger_forces` — contact force magnitude per finger over time, human vs robot,
-  with each series' maximum as a dashed line (the DexCanvas paper's Figure 5b);
+* :func:`plot_finger_forces` — contact force magnitude per finger over time, human vs robot
+  (and, for a force-matched run, the force the plan asked of each robot finger), with each
+  series' maximum as a dashed line (the DexCanvas paper's Figure 5b);
 * :func:`plot_object_error` — object position and rotation error over time with the 5 cm
   success threshold (the DexCanvas rule) and the failing frames shaded;
 * :func:`plot_servo_tracking` — how far the re-simulated fingers and wrist trail their
@@ -69,10 +70,14 @@ def finger_forces(
 ) -> dict[str, np.ndarray | None]:
     """Per-finger contact force magnitudes [N], rows in ``FORCE_GROUPS`` order.
 
-    Returns ``{"robot": (T, 6), "human": (T, 6) or None}``. Robot: the re-simulation's
-    ``finger_force_world`` of the robot finger each human finger drives (NaN for a human finger
-    the robot lacks; fingers sharing a robot finger show the same values) and of the palm.
-    Human: ``Trajectory.contacts.finger_totals()`` when the demonstration has contact records.
+    Returns ``{"robot": (T, 6), "human": (T, 6) or None, "plan": (T, 6) or None}``. Robot:
+    the re-simulation's ``finger_force_world`` of the robot finger each human finger drives
+    (NaN for a human finger the robot lacks; fingers sharing a robot finger show the same
+    values) and of the palm. Human: ``Trajectory.contacts.finger_totals()`` when the
+    demonstration has contact records, else a force-matched run's own ``human_force`` (the
+    forces it matched, from the force pipeline; NaN for the palm and the fingers the robot
+    lacks). Plan: a force-matched run's ``robot_force`` (the force QP's contact force of each
+    mapped human finger's robot finger; NaN likewise), ``None`` for other runs.
     """
     parts = [str(p) for p in run_arrays["force_parts"]]
     F = np.linalg.norm(np.asarray(run_arrays["finger_force_world"], dtype=np.float64), axis=-1)
@@ -85,7 +90,26 @@ def finger_forces(
     human_mag = None
     if human is not None and human.contacts is not None and human.contacts.num_records:
         human_mag = np.linalg.norm(human.contacts.finger_totals().astype(np.float64), axis=-1)
-    return {"robot": robot, "human": human_mag}
+    # a force-matched run's arrays: columns are the retargeter's fingers (FINGERS order, those
+    # the hand maps)
+    mapped = [f for f in FINGERS if hand.fingers.get(f) is not None]
+
+    def per_finger(key: str) -> np.ndarray:
+        P = np.linalg.norm(np.asarray(run_arrays[key], dtype=np.float64), axis=-1)
+        if P.shape != (T, len(mapped)):
+            raise VizError(
+                f"{key} must be (T, {len(mapped)}, 3), one per {hand.name} finger; got "
+                f"{np.shape(run_arrays[key])}"
+            )
+        out = np.full((T, len(FORCE_GROUPS)), np.nan)
+        for i, f in enumerate(mapped):
+            out[:, FORCE_GROUPS.index(f)] = P[:, i]
+        return out
+
+    plan = per_finger("robot_force") if "robot_force" in run_arrays else None
+    if human_mag is None and "human_force" in run_arrays:
+        human_mag = per_finger("human_force")  # the forces it matched (no palm: NaN)
+    return {"robot": robot, "human": human_mag, "plan": plan}
 
 
 def plot_finger_forces(
@@ -97,9 +121,14 @@ def plot_finger_forces(
     title: str = "",
     robot_label: str = "robot (re-simulation)",
     human_label: str = "human (demonstration)",
+    plan: np.ndarray | None = None,
+    plan_label: str = "robot plan (force QP)",
+    notes: Mapping[str, str] | None = None,
 ) -> Path:
     """Force magnitude [N] per finger over time: one panel per ``FORCE_GROUPS`` row, the
-    robot's line in the finger's colour, the human's in black, dashed lines at each maximum."""
+    robot's line in the finger's colour, the human's in black, the plan's (``plan``, same
+    shape) dotted grey, dashed lines at each maximum; ``notes`` (per ``FORCE_GROUPS`` name)
+    are written in the panel's corner (e.g. the finger's force correlation)."""
     plt = _pyplot()
     time_s = np.asarray(time_s, dtype=np.float64)
     robot = np.asarray(robot, dtype=np.float64)
@@ -107,19 +136,22 @@ def plot_finger_forces(
         raise VizError(f"robot forces must be (T, 6) with T = {time_s.shape[0]}, got {robot.shape}")
     if human is not None and np.asarray(human).shape != robot.shape:
         raise VizError(f"human forces must be {robot.shape}, got {np.asarray(human).shape}")
+    if plan is not None and np.asarray(plan).shape != robot.shape:
+        raise VizError(f"planned forces must be {robot.shape}, got {np.asarray(plan).shape}")
+    finite = [a for a in (robot, plan) if a is not None and np.isfinite(a).any()]
     fig, axes = plt.subplots(len(FORCE_GROUPS), 1, figsize=(8, 9), sharex=True)
-    top = np.nanmax(
-        [
-            np.nanmax(robot) if np.isfinite(robot).any() else 0.0,
-            np.nanmax(human) if human is not None else 0.0,
-            0.1,
-        ]
+    top = max(
+        [float(np.nanmax(a)) for a in finite]
+        + [float(np.nanmax(human)) if human is not None and np.isfinite(human).any() else 0.0]
+        + [0.1]
     )
     for row, (ax, name) in enumerate(zip(axes, FORCE_GROUPS, strict=True)):
         color = style.GROUP_COLORS[name][:3]
         series = [(robot[:, row], robot_label, color, "-")]
         if human is not None:
             series.append((np.asarray(human)[:, row], human_label, (0.1, 0.1, 0.1), "-"))
+        if plan is not None:
+            series.append((np.asarray(plan)[:, row], plan_label, (0.45, 0.45, 0.45), ":"))
         for y, label, c, ls in series:
             if not np.isfinite(y).any():
                 continue
@@ -148,6 +180,11 @@ def plot_finger_forces(
                 fontsize=8,
                 color="0.4",
             )
+        if notes and notes.get(name):
+            ax.text(
+                0.01, 0.92, notes[name], transform=ax.transAxes, ha="left", va="top",
+                fontsize=7, color="0.25",
+            )  # fmt: skip
         ax.set_ylabel(f"{name}\n[N]", fontsize=8)
         ax.set_ylim(0, 1.15 * top)
         ax.grid(alpha=0.3)

@@ -116,9 +116,16 @@ def _section(run_dir: Path, cfg: ReportConfig) -> RunSection:
     title = f"{m['hand']} · {m['pair']}"
     sec.plots.append(
         (
-            "contact force per finger (human vs robot)",
+            "contact force per finger (human vs robot)"
+            + (", and the force matching's plan" if forces["plan"] is not None else ""),
             plots.plot_finger_forces(
-                plot_dir / f"forces{ext}", t, forces["robot"], forces["human"], title=title
+                plot_dir / f"forces{ext}",
+                t,
+                forces["robot"],
+                forces["human"],
+                title=title,
+                plan=forces["plan"],
+                notes=force_notes(m),
             ),
         )
     )
@@ -179,6 +186,21 @@ def _section(run_dir: Path, cfg: ReportConfig) -> RunSection:
             sec.scene_html = run.run_dir / manifest["scene_html"]
         sec.notes.append(f"stills rendered by {manifest['renderer']}, {manifest['layout']} layout")
     return sec
+
+
+def force_notes(m: dict) -> dict[str, str]:
+    """Per human finger of a force-matched run (``metrics.json``'s ``force_per_finger``): its
+    force profile correlation with the human's and its share of the hand's load, for the force
+    plot's panels; empty for other runs and for fingers the human never loaded."""
+    out = {}
+    for f, v in (m.get("force_per_finger") or {}).items():
+        if v.get("profile_correlation") is None:
+            continue
+        text = f"profile correlation {v['profile_correlation']:.2f}"
+        if v.get("load_share") is not None:
+            text += f" · {100 * v['load_share']:.0f} % of the human hand's force"
+        out[f] = text
+    return out
 
 
 def _read_manifest(run_dir: Path) -> dict | None:
