@@ -13,6 +13,7 @@ import argparse
 import contextlib
 import json
 import logging
+import math
 import signal
 import sys
 import threading
@@ -107,6 +108,16 @@ def _non_negative_int(text: str) -> int:
     return n
 
 
+def _positive_float(text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        x = float("nan")
+    if not (math.isfinite(x) and x > 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
+    return x
+
+
 def _positive_int(text: str) -> int:
     n = _non_negative_int(text)
     if n == 0:
@@ -135,6 +146,13 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
         "--forces",
         action="store_true",
         help="force matching: press like the human (runs the force pipeline first if needed)",
+    )
+    p.add_argument(
+        "--force-scale",
+        type=_positive_float,
+        default=1.0,
+        metavar="X",
+        help="with --forces: press with X times the human's forces (a grip margin; default 1)",
     )
     p.add_argument(
         "--refine",
@@ -192,6 +210,7 @@ def _plain_run_config(args: argparse.Namespace):
         forces=args.forces,
         refine=args.refine,
         refine_retries=args.refine_retries,
+        force_scale=args.force_scale,
         progress=not args.quiet,
     )
 

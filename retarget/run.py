@@ -54,6 +54,9 @@ class RunConfig:
     result."""
     refine_retries: int = 4
     """How often the refinement backtracks when it loses the object (``RefineConfig.retries``)."""
+    force_scale: float = 1.0
+    """Force matching presses with this multiple of the human's forces
+    (``RetargetConfig.force_scale``: a grip margin); needs ``forces``."""
     progress: bool = True
     """Show progress bars and the summary on the terminal."""
 
@@ -270,6 +273,14 @@ def run_retarget(cfg: RunConfig) -> dict:
     from retarget.retargeter import RetargetConfig, Retargeter
     from retarget.validate import Resimulator, ValidateConfig
 
+    if cfg.force_scale != 1.0 and not cfg.forces:
+        raise RetargetError(
+            "--force-scale scales the human forces that force matching presses with: add "
+            "--forces (or leave --force-scale out)"
+        )
+    rcfg = RetargetConfig(
+        backend=cfg.backend, force_matching=cfg.forces, force_scale=cfg.force_scale
+    ).validate()
     pair = Pair.parse(cfg.pair)
     hand = get_hand(cfg.hand)
     check_pair(hand, pair.manipulation_type)
@@ -284,9 +295,7 @@ def run_retarget(cfg: RunConfig) -> dict:
         human_sim = None
         if cfg.forces and (traj.contacts is None or traj.object_wrench_world is None):
             traj, human_sim = _human_forces(traj, pair, prog)
-        retargeter = Retargeter(
-            hand, geometry, RetargetConfig(backend=cfg.backend, force_matching=cfg.forces)
-        )
+        retargeter = Retargeter(hand, geometry, rcfg)
         setup_s = time.perf_counter() - t0
         robot = retargeter.retarget(traj, progress=prog.task("retargeting", traj.num_frames))
         vcfg = ValidateConfig(contact_timeconst=FORCE_CONTACT_TIMECONST if cfg.forces else None)
@@ -323,6 +332,7 @@ def run_retarget(cfg: RunConfig) -> dict:
         "retarget_config": asdict(retargeter.cfg),
         "demonstration_of": substituted or str(pair),
         "forces": cfg.forces,
+        "force_scale": cfg.force_scale if cfg.forces else None,
     }
     if cfg.forces:
         metrics.update(force_metrics(robot, sim, traj, retargeter))

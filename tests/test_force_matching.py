@@ -323,6 +323,51 @@ def test_retargeter_matches_the_human_object_force(human_with_forces):
     assert refined_force_metrics(out, too_short, traj, r) is None
 
 
+def test_force_scale_squeezes_harder_with_the_same_object_force(human_with_forces):
+    """``force_scale``: the plan asks for that multiple of the human's finger forces; the extra
+    is squeeze between the fingers, so the object's net force stays the required one, and the
+    metrics' human side stays the human's own forces."""
+    from dexcanvas_core.demos.geometry import object_geometry
+    from retarget.errors import RetargetError
+    from retarget.hands import get_hand
+    from retarget.retargeter import RetargetConfig, Retargeter
+
+    traj = human_with_forces.slice(300, 420)  # grasp held, object lifted
+    outs = {}
+    for k in (1.0, 1.5):
+        r = Retargeter(
+            get_hand("allegro"),
+            object_geometry("cube2"),
+            RetargetConfig(force_matching=True, force_scale=k),
+        )
+        outs[k] = r.retarget(traj)
+    np.testing.assert_array_equal(outs[1.0].human_force, outs[1.5].human_force)
+    touching = np.linalg.norm(outs[1.0].human_force, axis=2).sum(1) > 0.1
+    pressed = {k: np.linalg.norm(o.robot_force, axis=2).sum(1)[touching] for k, o in outs.items()}
+    human = np.linalg.norm(outs[1.0].human_force, axis=2).sum(1)[touching]
+    assert np.median(pressed[1.0] / human) == pytest.approx(1.0, abs=0.15)
+    assert np.median(pressed[1.5] / human) == pytest.approx(1.5, abs=0.2)
+    net = {k: o.robot_force.sum(1)[touching] for k, o in outs.items()}
+    diff = np.linalg.norm(net[1.5] - net[1.0], axis=1)
+    assert np.median(diff) < 0.1 * np.median(np.linalg.norm(net[1.0], axis=1)) + 0.05
+    # and the commands press deeper
+    depth = {k: np.abs(o.q_command - o.q)[touching, 6:].sum(1) for k, o in outs.items()}
+    assert np.median(depth[1.5]) > 1.2 * np.median(depth[1.0])
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(RetargetError, match="force_scale"):
+            RetargetConfig(force_matching=True, force_scale=bad).validate()
+
+
+def test_force_scale_without_forces_says_what_to_do(tmp_path, capsys):
+    from retarget.cli import main
+
+    out = tmp_path / "never"
+    rc = main(["run", "--hand", "allegro", "--pair", "cube2/tripod", "--force-scale", "1.5",
+               "--quiet", "--out", str(out)])  # fmt: skip
+    assert rc == 2 and not out.exists()
+    assert "add --forces" in capsys.readouterr().err
+
+
 def test_contact_flags_come_from_the_captured_geometry_unless_asked(human_with_forces):
     """By default a force-annotated demonstration gets the same contact targets as the bare
     capture (the records only supply forces); ``contacts_from="records"`` takes the flags from
