@@ -37,7 +37,7 @@ from typing import Literal
 import mujoco
 import numpy as np
 
-from dexcanvas_core.keypoints import FINGERS, MANO21
+from dexcanvas_core.keypoints import MANO21
 from dexcanvas_core.rotations import aa_to_matrix, aa_to_quat_wxyz
 from dexcanvas_core.trajectory import Trajectory
 from retarget.errors import RetargetError
@@ -315,7 +315,7 @@ class RetargetConfig:
     on successful runs 0.71 / 0.73 / 0.74 / 0.75 / 0.77, paired heavy / light 36 / 53, 36 / 61,
     39 / 64, 44 / 58, 42 / 61 %, the fingers' median relative magnitude error 0.42 / 0.43 /
     0.46 / 0.55 / 0.81 (the object force error 5–6 % of the weight at every scale). The
-    default stays the human's forces: the gains are a few runs against 5–9 flipping each way."""
+    default stays the human's forces: the gains are a few runs, with 2–10 flipping each way."""
     contacts_from: str = "geometry"
     """Which human fingers and phalanges touch, frame by frame:
 
@@ -510,7 +510,7 @@ class Retargeter:
         self.kp_names = list(self.keypoint_map)
         self.kp_index = np.array([MANO21.index(k) for k in self.kp_names])
         self.kp_sites = [self.keypoint_map[k] for k in self.kp_names]
-        tip_human = [f for f in FINGERS if hand.fingers.get(f) is not None]
+        tip_human = list(hand.mapped_human_fingers)
         self.tip_human = tip_human
         self.tip_index = np.array([MANO21.index(f"{f}_tip") for f in tip_human])
         self.tip_sites = [f"{hand.fingers[f]}_tip_site" for f in tip_human]

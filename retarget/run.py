@@ -152,9 +152,11 @@ LOAD_BEARING_SHARE = 0.1
 share of the summed mean force of the fingers the robot maps (``force_metrics``'s
 ``*_load_bearing`` means). Measured on the force-preservation benchmark (five-finger hands,
 successful (d) runs, 2026-12-05): the 154 load-bearing finger profiles correlate with the
-human's at 0.82, the 42 lighter touches (mean 0.02–0.53 N) at 0.30: a press of a fraction of a
-millimetre, which the servos replayed open loop lose when the object sits a millimetre off its
-planned pose (README, force preservation)."""
+human's at 0.82, the 42 lighter touches (mean 0.02–0.53 N) at 0.30: the plan asks for them
+(plan vs human 0.92 on Shadow and Ability), but the servos replayed open loop lose the contact
+when the object drifts from its planned pose (Shadow on cylinder1h/ring: the ring finger 0.1–4.5
+mm off the simulated cylinder, the cylinder 1–2 cm from the human's; README, force
+preservation)."""
 
 
 def force_metrics(robot, sim, human, retargeter) -> dict:

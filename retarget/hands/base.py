@@ -358,6 +358,12 @@ class HandModel:
         return tuple(self.tip_sites)
 
     @property
+    def mapped_human_fingers(self) -> tuple[str, ...]:
+        """The human fingers this hand maps, thumb…pinky order: the retargeter's fingertip
+        targets, and the columns of a force-matched run's ``human_force`` / ``robot_force``."""
+        return tuple(f for f in FINGERS if self.fingers.get(f) is not None)
+
+    @property
     def robot_to_human(self) -> dict[str, str]:
         """Robot finger → the first human finger (thumb…pinky order) mapped to it (a gripper's
         finger driven by index and middle: index)."""

@@ -90,9 +90,7 @@ def finger_forces(
     human_mag = None
     if human is not None and human.contacts is not None and human.contacts.num_records:
         human_mag = np.linalg.norm(human.contacts.finger_totals().astype(np.float64), axis=-1)
-    # a force-matched run's arrays: columns are the retargeter's fingers (FINGERS order, those
-    # the hand maps)
-    mapped = [f for f in FINGERS if hand.fingers.get(f) is not None]
+    mapped = hand.mapped_human_fingers  # a force-matched run's arrays' columns
 
     def per_finger(key: str) -> np.ndarray:
         P = np.linalg.norm(np.asarray(run_arrays[key], dtype=np.float64), axis=-1)
@@ -138,13 +136,9 @@ def plot_finger_forces(
         raise VizError(f"human forces must be {robot.shape}, got {np.asarray(human).shape}")
     if plan is not None and np.asarray(plan).shape != robot.shape:
         raise VizError(f"planned forces must be {robot.shape}, got {np.asarray(plan).shape}")
-    finite = [a for a in (robot, plan) if a is not None and np.isfinite(a).any()]
     fig, axes = plt.subplots(len(FORCE_GROUPS), 1, figsize=(8, 9), sharex=True)
-    top = max(
-        [float(np.nanmax(a)) for a in finite]
-        + [float(np.nanmax(human)) if human is not None and np.isfinite(human).any() else 0.0]
-        + [0.1]
-    )
+    shown = [np.asarray(a) for a in (robot, human, plan) if a is not None]
+    top = max([0.1] + [float(np.nanmax(a)) for a in shown if np.isfinite(a).any()])
     for row, (ax, name) in enumerate(zip(axes, FORCE_GROUPS, strict=True)):
         color = style.GROUP_COLORS[name][:3]
         series = [(robot[:, row], robot_label, color, "-")]
