@@ -186,6 +186,7 @@ def force_metrics(robot, sim, human, retargeter) -> dict:
     total = float(H.mean(axis=0).sum())
     for i, f in enumerate(retargeter.tip_human):
         h, r = H[:, i], R[:, i]
+        hm = float(h.mean())
         on = (h > 0.05) | (r > 0.05)
         held = h > 0.05  # where the human finger carries force
         used = held.sum() > 2
@@ -194,9 +195,9 @@ def force_metrics(robot, sim, human, retargeter) -> dict:
             "correlation": _corr(h[on], r[on]) if used else None,
             "profile_correlation": _corr(h, r) if used else None,
             "relative_magnitude_error": rel,
-            "human_force_mean_n": float(h.mean()),
+            "human_force_mean_n": hm,
             "robot_force_mean_n": float(r.mean()),
-            "load_share": float(h.mean()) / total if total > 0 else None,
+            "load_share": hm / total if total > 0 else None,
         }
     human_total = human.contacts.finger_totals()[:, : len(FORCE_GROUPS)].sum(axis=1)
     robot_total = sim.finger_force_world.sum(axis=1)
