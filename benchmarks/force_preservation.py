@@ -15,6 +15,17 @@ speed). Where it does not reproduce the demonstration (DexCanvas rule) there are
 to match: variant (d) is skipped for it (counted and listed) and the force columns of the other
 variants stay empty.
 
+Human replay (``--no-human-replay`` to skip; ``mpc`` only): every (pair, object) the force
+pipeline reproduced is simulated a second time with another seed of its sampling MPC
+(``REPLAY_SEED``), and the replay's per-finger forces are scored against the first
+simulation's exactly as a robot's are (``retarget.run.human_replay_metrics``). The human's
+forces are one sample of a stochastic tracker: a robot matched to that sample cannot be
+expected to correlate with it better than another equally valid sample does, so the replay
+is the force correlation's ceiling, reported on the same runs and fingers as each variant's
+(``replay_ceiling``), and the replay's success on light and heavy objects is the heavy/light
+parity the human hand model itself reaches (``human_heavy_vs_light``). It doubles the force
+pipeline's CPU time (cached with ``--human-cache`` like the first simulations).
+
 Per hand (``--hands``, default every registered hand; a hand skips pairs it cannot perform,
 ``retarget.run.check_pair``) and per (pair, object), five variants side by side:
 
@@ -154,6 +165,9 @@ TARGET_SUCCESS = 0.85
 TARGET_RATIO = 2.0
 TARGET_CORRELATION = 0.8
 TARGET_FORCE_PCT_WEIGHT = 0.15
+REPLAY_SEED = 1
+"""MPC seed of the human replay (``BenchConfig.human_replay``); the first simulation runs at
+``MPCConfig``'s default seed, 0."""
 
 
 @dataclass(frozen=True)
@@ -192,6 +206,15 @@ class BenchConfig:
     human_cache: Path | None = None
     """Directory of cached human simulations (``--human-cache``): a (demonstration, object,
     tracker) simulated once is read back on later runs instead of simulated again."""
+    human_replay: bool = True
+    """Simulate every (pair, object) a second time with another seed of the force pipeline's
+    sampling MPC (``REPLAY_SEED``) and score its per-finger forces against the first's as the
+    robots' are (``retarget.run.human_replay_metrics``): the ceiling of the force correlation
+    (``--no-human-replay``: skip; never with the deterministic ``open_loop`` tracker)."""
+
+    def replays(self) -> bool:
+        """Whether this run simulates the human replays (``mpc`` only)."""
+        return self.human_replay and self.human_tracker == "mpc"
 
     def validate(self) -> BenchConfig:
         from retarget.hands import available_hands
@@ -258,16 +281,28 @@ def _error(e: BaseException) -> dict:
     return {"error": f"{type(e).__name__}: {e}", "traceback": traceback.format_exc(limit=4)}
 
 
-def _human_sim(args) -> dict:
-    """Worker: the force pipeline on one (pair, object). Returns ``{"record", "trajectory"}``;
-    ``trajectory`` (the demonstration annotated with contacts and forces) only on success."""
-    from dexcanvas_core.sim.pipeline import SimConfig, simulate
+def human_sim_config(object_id: str, tracker: str, mpc_seed: int | None = None):
+    """The force pipeline's ``SimConfig`` of one human simulation: the defaults, or with the
+    sampling MPC at ``mpc_seed`` (the human replay)."""
+    from dexcanvas_core.sim.pipeline import SimConfig
+    from dexcanvas_core.sim.tracker import MPCConfig
 
-    key, traj, object_id, tracker = args
-    rec: dict = {"object_id": object_id, "tracker": tracker}
+    if mpc_seed is None:
+        return SimConfig(tracker=tracker, object_id=object_id)
+    return SimConfig(tracker=tracker, object_id=object_id, mpc=MPCConfig(seed=mpc_seed))
+
+
+def _human_sim(args) -> dict:
+    """Worker: the force pipeline on one (pair, object), at the MPC's default seed or at
+    ``mpc_seed`` (the replay). Returns ``{"record", "trajectory"}``; ``trajectory`` (the
+    demonstration annotated with contacts and forces) only on success."""
+    from dexcanvas_core.sim.pipeline import simulate
+
+    key, traj, object_id, tracker, mpc_seed = args
+    rec: dict = {"object_id": object_id, "tracker": tracker, "mpc_seed": mpc_seed}
     w0 = time.perf_counter()
     try:
-        res = simulate(traj, SimConfig(tracker=tracker, object_id=object_id))
+        res = simulate(traj, human_sim_config(object_id, tracker, mpc_seed))
         rec.update({k: res.metrics[k] for k in HUMAN_METRICS})
         annotated = res.trajectory if res.success else None
     except Exception as e:  # no human forces for this (pair, object): recorded, counted
@@ -564,6 +599,100 @@ def heavy_vs_light(rows: list[dict]) -> dict:
     return out
 
 
+def human_heavy_vs_light(human: list[dict]) -> dict:
+    """The force pipeline's own success on light and heavy objects: the first simulations
+    (``first``), and of those that reproduced their demonstration, the share the replay
+    reproduced again (``replay``); ``paired``: the demonstrations simulated with both a light
+    object and its heavy variant."""
+
+    def rates(recs: list[dict], ok) -> dict:
+        light = [ok(r) for r in recs if r["object_variant"] == "light"]
+        heavy = [ok(r) for r in recs if r["object_variant"] == "heavy"]
+        by_index = {}
+        for r in recs:
+            by_index.setdefault(r["index"], {})[r["object_variant"]] = ok(r)
+        pairs = [v for v in by_index.values() if len(v) == 2]
+        return {
+            "light_runs": len(light),
+            "light_success_rate": float(np.mean(light)) if light else None,
+            "heavy_runs": len(heavy),
+            "heavy_success_rate": float(np.mean(heavy)) if heavy else None,
+            "paired_runs": len(pairs),
+            "paired_light_success_rate": float(np.mean([v["light"] for v in pairs]))
+            if pairs
+            else None,
+            "paired_heavy_success_rate": float(np.mean([v["heavy"] for v in pairs]))
+            if pairs
+            else None,
+        }
+
+    replayed = [r for r in human if "replay" in r]
+    return {
+        "first": rates(human, lambda r: bool(r["success"])),
+        "replay": rates(replayed, lambda r: bool(r["replay"]["success"])) if replayed else None,
+    }
+
+
+def replay_record(first, res: dict) -> dict:
+    """A human simulation's ``replay`` entry: the replay's outcome (``res``: a
+    :func:`_human_sim` result at ``REPLAY_SEED``) and, when it too reproduced the
+    demonstration, its per-finger forces scored against the first simulation's (``first``)
+    by ``retarget.run.human_replay_metrics``."""
+    from retarget.run import human_replay_metrics
+
+    rec = res["record"]
+    keep = ("mpc_seed", "success", "failed_at_frame", "object_pos_err_max_m", "compute_s",
+            "cached", "error")  # fmt: skip
+    out = {k: rec.get(k) for k in keep}
+    if res["trajectory"] is not None:
+        out.update(human_replay_metrics(first, res["trajectory"]))
+    return out
+
+
+CORRELATION_KEYS = ("force_profile_correlation_mean", "force_correlation_mean",
+                    "force_profile_correlation_mean_load_bearing",
+                    "force_correlation_mean_load_bearing")  # fmt: skip
+
+
+def replay_ceiling(rows: list[dict], human: list[dict], variant: str = "d") -> dict:
+    """The human replay's force correlations on the runs where ``variant`` succeeded, next to
+    the variant's own on the same runs: for each such run with a scored replay, the replay's
+    per-finger scores over the fingers the run scores (its hand's, those the human loaded),
+    with the run's load shares (``retarget.run.correlation_means``); then means over runs.
+    ``runs`` counts the runs compared."""
+    from retarget.run import correlation_means
+
+    replays = {
+        (h["index"], h["object_id"]): h["replay"]["force_per_finger"]
+        for h in human
+        if "force_per_finger" in h.get("replay", {})
+    }
+    ours, ceiling = [], []
+    for r in rows:
+        if r["variant"] != variant or "skipped" in r or "error" in r or not r.get("success"):
+            continue
+        rep_per = replays.get((r["index"], r["object_id"]))
+        per = r.get("force_per_finger")
+        if rep_per is None or not per:
+            continue
+        scored = [
+            f
+            for f, v in per.items()
+            if v["correlation"] is not None and rep_per.get(f, {}).get("correlation") is not None
+        ]
+        if not scored:
+            continue
+        ceiling.append(correlation_means(
+            {f: {**rep_per[f], "load_share": per[f]["load_share"]} for f in scored}
+        ))  # fmt: skip
+        ours.append({k: r.get(k) for k in CORRELATION_KEYS})
+
+    def mean(ms: list[dict]) -> dict:
+        return {k: _mean(ms, k) for k in CORRELATION_KEYS}
+
+    return {"variant": variant, "runs": len(ours), "replay": mean(ceiling), "ours": mean(ours)}
+
+
 CONTACT_ERROR_BINS_M = (0.002, 0.005, 0.010)
 """Upper edges of the contact-error bins of :func:`by_contact_error` (the last bin is open)."""
 
@@ -615,8 +744,13 @@ def contact_error_table(scope: str, table: dict):
     return t
 
 
-def target_checks(scope: str, rows: list[dict], agg: dict, hv: dict) -> list[dict]:
-    """The issue's targets on one scope's rows (``met`` is ``None`` when not measured)."""
+def target_checks(
+    scope: str, rows: list[dict], agg: dict, hv: dict, ceiling: dict | None = None
+) -> list[dict]:
+    """The issue's targets on one scope's rows (``met`` is ``None`` when not measured). With
+    ``ceiling`` (``{variant: replay_ceiling(...)}``), each correlation target also carries the
+    human replay's correlation on the variant's successful runs (``human_replay``, over
+    ``human_replay_runs`` of them) and the variant's own on those same runs (``same_runs``)."""
     d = agg["d"]
     force_keys = {
         (r["hand"], r["pair"], r["object_id"])
@@ -656,7 +790,18 @@ def target_checks(scope: str, rows: list[dict], agg: dict, hv: dict) -> list[dic
     ratio_met = None
     if sa is not None and sd is not None:
         ratio_met = bool(sd >= TARGET_RATIO * sa and sd > 0)
-    return [
+
+    def replay(v: str, key: str) -> dict:
+        c = (ceiling or {}).get(v)
+        if c is None:
+            return {}
+        return {
+            "human_replay": c["replay"][key],
+            "same_runs": c["ours"][key],
+            "human_replay_runs": c["runs"],
+        }
+
+    checks = [
         {
             "scope": scope,
             "name": "success",
@@ -680,6 +825,7 @@ def target_checks(scope: str, rows: list[dict], agg: dict, hv: dict) -> list[dic
             "runs, whole demonstration)",
             "value": profile,
             "met": at_least(profile, TARGET_CORRELATION),
+            **replay("d", "force_profile_correlation_mean"),
         },
         {
             "scope": scope,
@@ -687,6 +833,7 @@ def target_checks(scope: str, rows: list[dict], agg: dict, hv: dict) -> list[dic
             "target": f"… over contact frames only ≥ {TARGET_CORRELATION:g}",
             "value": corr,
             "met": at_least(corr, TARGET_CORRELATION),
+            **replay("d", "force_correlation_mean"),
         },
         {
             "scope": scope,
@@ -714,6 +861,7 @@ def target_checks(scope: str, rows: list[dict], agg: dict, hv: dict) -> list[dic
             "runs, whole demonstration)",
             "value": e["force_profile_correlation_mean_successful"],
             "met": at_least(e["force_profile_correlation_mean_successful"], TARGET_CORRELATION),
+            **replay("e", "force_profile_correlation_mean"),
         },
         {
             "scope": scope,
@@ -726,6 +874,7 @@ def target_checks(scope: str, rows: list[dict], agg: dict, hv: dict) -> list[dic
             else bool(e["object_force_error_pct_weight_successful"] <= TARGET_FORCE_PCT_WEIGHT),
         },
     ]
+    return checks
 
 
 # ------------------------------------------------------------------------------------- output
@@ -739,7 +888,9 @@ def _coloured(text: str, met: bool | None) -> str:
     return f"[green]{text}[/green]" if met else f"[red]{text}[/red]"
 
 
-def variants_table(title: str, agg: dict):
+def variants_table(title: str, agg: dict, ceiling: dict | None = None):
+    """One scope's variants; with ``ceiling`` (:func:`replay_ceiling` of (d)), a last row with
+    the human replay's force correlations on (d)'s successful runs."""
     from rich.table import Table
 
     from retarget.run import LOAD_BEARING_SHARE
@@ -786,6 +937,17 @@ def variants_table(title: str, agg: dict):
             f"{_f(a['penetration_max_m'], 1e3)} / {_f(a['sim_penetration_max_m'], 1e3)}",
             _f(a["ms_per_frame"], fmt=".2f"),
         )
+    if ceiling is not None and ceiling["runs"]:
+        c = ceiling["replay"]
+        t.add_row(
+            f"human replay (MPC seed {REPLAY_SEED} vs 0)",
+            f"{ceiling['runs']} (d) ok",
+            *["–"] * 4,
+            f"{_f(c['force_profile_correlation_mean'], fmt='.2f')} / "
+            f"{_f(c['force_correlation_mean'], fmt='.2f')} / "
+            f"{_f(c['force_profile_correlation_mean_load_bearing'], fmt='.2f')}",
+            *["–"] * 4,
+        )
     return t
 
 
@@ -797,9 +959,15 @@ def human_table(sims: list[dict]):
     t = Table(
         title=f"human force pipeline ({tracker}): {ok}/{len(sims)} reproduced the demonstration",
         caption="the others have no human forces: (d) is skipped for them and the other "
-        "variants' force columns stay empty",
+        "variants' force columns stay empty. Replay: the same demonstration simulated again "
+        "with another MPC seed, its per-finger forces scored against the first's (force "
+        "correlation over the whole demonstration / over contact frames, all five fingers)",
     )
-    for c in ("pair", "object", "mass kg", "reproduced", "max err cm", "CPU s"):
+    replays = any("replay" in s for s in sims)
+    cols = ("pair", "object", "mass kg", "reproduced", "max err cm", "CPU s")
+    if replays:
+        cols += (f"replay (seed {REPLAY_SEED})", "replay F corr")
+    for c in cols:
         t.add_column(c, justify="left" if c in ("pair", "object") else "right", no_wrap=True)
     for s in sims:
         if "error" in s:
@@ -808,24 +976,40 @@ def human_table(sims: list[dict]):
             status = "[green]yes[/green]"
         else:
             status = f"[red]no (frame {s['failed_at_frame']})[/red]"
-        t.add_row(
+        cells = [
             s["pair"],
             s["object_id"],
             _f(s.get("mass_kg"), fmt=".3f"),
             status,
             _f(s.get("object_pos_err_max_m"), 100),
             _f(s.get("compute_s")),
-        )
+        ]
+        if replays:
+            r = s.get("replay")
+            if r is None:
+                cells += ["–", "–"]
+            else:
+                ok_r = "[green]yes[/green]" if r["success"] else "[red]no[/red]"
+                cells += [
+                    ok_r,
+                    f"{_f(r.get('force_profile_correlation_mean'), fmt='.2f')} / "
+                    f"{_f(r.get('force_correlation_mean'), fmt='.2f')}",
+                ]
+        t.add_row(*cells)
     return t
 
 
-def heavy_table(hv_by_scope: dict):
+def heavy_table(hv_by_scope: dict, human_hv: dict | None = None):
+    """Heavy vs light per scope and variant; with ``human_hv`` (:func:`human_heavy_vs_light`),
+    the force pipeline's own rates below."""
     from rich.table import Table
 
     t = Table(
         title="heavy vs light: strict success %",
         caption="all: every light / heavy run; paired: the same (hand, pair) with the light "
-        "object and its heavy variant (n pairs)",
+        "object and its heavy variant (n pairs). human: the force pipeline's own success (the "
+        f"replay at MPC seed {REPLAY_SEED}: of the simulations that reproduced their "
+        "demonstration)",
     )
     for c in ("scope", "variant", "light %", "heavy %", "paired light %", "paired heavy %", "n"):
         t.add_column(c, justify="left" if c in ("scope", "variant") else "right", no_wrap=True)
@@ -844,6 +1028,18 @@ def heavy_table(hv_by_scope: dict):
                 _f(h["paired_heavy_success_rate"], 100, ".0f"),
                 str(h["paired_runs"]),
             )
+    for name, h in (human_hv or {}).items():
+        if h is None:
+            continue
+        t.add_row(
+            "human",
+            "force pipeline" if name == "first" else f"replay (seed {REPLAY_SEED})",
+            f"{_f(h['light_success_rate'], 100, '.0f')} ({h['light_runs']})",
+            f"{_f(h['heavy_success_rate'], 100, '.0f')} ({h['heavy_runs']})",
+            _f(h["paired_light_success_rate"], 100, ".0f"),
+            _f(h["paired_heavy_success_rate"], 100, ".0f"),
+            str(h["paired_runs"]),
+        )
     return t
 
 
@@ -863,6 +1059,11 @@ def targets_table(scope: str, checks: list[dict]):
                 s += f", {a / b:.1f}×"
         elif c["name"] == "correlation":
             s = _f(v, fmt=".2f")
+            if c.get("human_replay_runs"):
+                s += (
+                    f" (same {c['human_replay_runs']} runs: {_f(c['same_runs'], fmt='.2f')}; "
+                    f"human replay {_f(c['human_replay'], fmt='.2f')})"
+                )
         else:
             s = f"{_f(v, 100, '.0f')} %" + (f" (n={c['runs']})" if "runs" in c else "")
         verdict = {True: "[green]yes[/green]", False: "[red]no[/red]", None: "n/a"}[c["met"]]
@@ -948,15 +1149,13 @@ def _sim_sources_digest() -> str:
     return h.hexdigest()
 
 
-def human_cache_key(traj, object_id: str, tracker: str) -> str:
+def human_cache_key(traj, object_id: str, tracker: str, mpc_seed: int | None = None) -> str:
     """File stem of one human simulation in the cache: the demonstration's data, the object,
-    the tracker's configuration and the force pipeline's source."""
+    the tracker's configuration (the replay's seed included) and the force pipeline's source."""
     import hashlib
 
-    from dexcanvas_core.sim.pipeline import SimConfig
-
     h = hashlib.sha256()
-    h.update(repr(SimConfig(tracker=tracker, object_id=object_id)).encode())
+    h.update(repr(human_sim_config(object_id, tracker, mpc_seed)).encode())
     h.update(_sim_sources_digest().encode())
     h.update(str(traj.uuid).encode())
     hand, obj = traj.hand, traj.object
@@ -1005,7 +1204,9 @@ def run_jobs(cfg: BenchConfig, demos: list, plans: list, hands: list, console):
     """Every (pair, object) through the force pipeline, and as soon as one is done, its hand
     jobs, over ``cfg.workers`` spawned one-thread processes. Returns ``(human_records, rows,
     skipped)``: one record per human simulation, one row per hand × (pair, object) × variant,
-    and the (hand, pair)s a hand cannot perform."""
+    and the (hand, pair)s a hand cannot perform. With ``cfg.replays()``, each human simulation
+    that reproduced its demonstration is simulated again at ``REPLAY_SEED`` and its record
+    gets a ``replay`` (:func:`replay_record`)."""
     from retarget.errors import RetargetError
     from retarget.run import check_pair
 
@@ -1032,13 +1233,42 @@ def run_jobs(cfg: BenchConfig, demos: list, plans: list, hands: list, console):
         pending = {}
         keys = {}
         computed = cfg.computed_variants()
+        firsts: dict[tuple[int, int], tuple[dict, object]] = {}  # (record, trajectory)
+        n_jobs = [total]  # grows by one per replay
+
+        def cached_or_submit(kind: str, i: int, k: int, seed: int | None) -> dict | None:
+            """The cached simulation, or ``None`` after submitting it."""
+            _, traj = demos[i]
+            oid = plans[i][k]["object_id"]
+            if cfg.human_cache is not None:
+                keys[kind, i, k] = human_cache_key(traj, oid, cfg.human_tracker, seed)
+                res = load_human_sim(cfg.human_cache, keys[kind, i, k], console)
+                if res is not None:
+                    return res
+            job = ((i, k), traj, oid, cfg.human_tracker, seed)
+            pending[pool.submit(_human_sim, job)] = (kind, i, k)
+            return None
+
+        def on_replay(i: int, k: int, res: dict) -> None:
+            rec, first = firsts.pop((i, k))
+            rec["replay"] = replay_record(first, res)
 
         def on_human(i: int, k: int, res: dict) -> None:
-            """A human simulation is done (or read from the cache): its hand jobs."""
+            """A human simulation is done (or read from the cache): its hand jobs, and its
+            replay."""
             pair, traj = demos[i]
             obj = plans[i][k]
             prog.update(task, description=f"human force pipeline · {pair} · {obj['object_id']}")
-            human.append({"index": i, "pair": str(pair), **obj, **res["record"]})
+            rec = {"index": i, "pair": str(pair), **obj, **res["record"]}
+            human.append(rec)
+            if cfg.replays() and res["trajectory"] is not None:
+                firsts[i, k] = (rec, res["trajectory"])
+                n_jobs[0] += 1
+                prog.update(task, total=n_jobs[0])
+                again = cached_or_submit("replay", i, k, REPLAY_SEED)
+                if again is not None:
+                    prog.advance(task)
+                    on_replay(i, k, again)
             for hand in performable[i]:
                 base = {
                     "hand": hand.name,
@@ -1062,17 +1292,12 @@ def run_jobs(cfg: BenchConfig, demos: list, plans: list, hands: list, console):
                 )
                 pending[pool.submit(_hand_job, job)] = ("hand", i, k)
 
-        for i, (_, traj) in enumerate(demos):
-            for k, obj in enumerate(plans[i]):
-                if cfg.human_cache is not None:
-                    keys[i, k] = human_cache_key(traj, obj["object_id"], cfg.human_tracker)
-                    res = load_human_sim(cfg.human_cache, keys[i, k], console)
-                    if res is not None:
-                        prog.advance(task)
-                        on_human(i, k, res)
-                        continue
-                job = ((i, k), traj, obj["object_id"], cfg.human_tracker)
-                pending[pool.submit(_human_sim, job)] = ("human", i, k)
+        for i in range(len(demos)):
+            for k in range(len(plans[i])):
+                res = cached_or_submit("human", i, k, None)
+                if res is not None:
+                    prog.advance(task)
+                    on_human(i, k, res)
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for fut in done:
@@ -1086,8 +1311,8 @@ def run_jobs(cfg: BenchConfig, demos: list, plans: list, hands: list, console):
                     continue
                 res = fut.result()
                 if cfg.human_cache is not None:
-                    store_human_sim(cfg.human_cache, keys[i, k], res)
-                on_human(i, k, res)
+                    store_human_sim(cfg.human_cache, keys[kind, i, k], res)
+                (on_replay if kind == "replay" else on_human)(i, k, res)
     human.sort(key=lambda r: (r["index"], r["object_variant"] == "heavy"))
     return human, rows, skipped
 
@@ -1121,6 +1346,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         + (f"; RetargetConfig {cfg.overrides}" if cfg.overrides else "")
         + (f"; RefineConfig {cfg.refine_overrides}" if cfg.refine_overrides else "")
         + (f"; human cache {cfg.human_cache}" if cfg.human_cache is not None else "")
+        + (f"; human replay at MPC seed {REPLAY_SEED}" if cfg.replays() else "")
     )
 
     human, rows, skipped = run_jobs(cfg, demos, plans, hands, console)
@@ -1148,8 +1374,21 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
     hv = {s: heavy_vs_light(rs) for s, rs in scopes.items()}
     by_contact = {s: by_contact_error(rs) for s, rs in scopes.items()}
     target_scope = FIVE_FINGER if five else ALL_HANDS
+    ceilings = per_hand_ceiling = None
+    if cfg.replays():
+        ceilings = {
+            s: {v: replay_ceiling(rs, human, v) for v in ("d", "e")} for s, rs in scopes.items()
+        }
+        per_hand_ceiling = {
+            h.name: replay_ceiling([r for r in rows if r["hand"] == h.name], human, "d")
+            for h in hands
+        }
     checks = target_checks(
-        target_scope, scopes[target_scope], scope_aggs[target_scope], hv[target_scope]
+        target_scope,
+        scopes[target_scope],
+        scope_aggs[target_scope],
+        hv[target_scope],
+        None if ceilings is None else ceilings[target_scope],
     )
 
     console.print(human_table(human))
@@ -1158,13 +1397,17 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         title = h.name + (" (five fingers)" if h.name in five else "")
         if n_skip:
             title += f" ({n_skip} pair(s) skipped: cannot perform)"
-        console.print(variants_table(title, per_hand[h.name]))
+        hc = None if per_hand_ceiling is None else per_hand_ceiling[h.name]
+        console.print(variants_table(title, per_hand[h.name], hc))
     for s, a in scope_aggs.items():
         if s == ALL_HANDS and len(hands) == 1:
             continue  # the same as the one hand's table
         names = ", ".join(five) if s == FIVE_FINGER else ", ".join(h.name for h in hands)
-        console.print(variants_table(f"{s} ({names})", a))
-    console.print(heavy_table(hv))
+        console.print(
+            variants_table(f"{s} ({names})", a, None if ceilings is None else ceilings[s]["d"])
+        )
+    human_hv = human_heavy_vs_light(human)
+    console.print(heavy_table(hv, human_hv))
     for s_, tab in by_contact.items():
         if s_ == ALL_HANDS and len(hands) == 1:
             continue
@@ -1242,13 +1485,24 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
             "ms_per_frame": "ours: RobotTrajectory.ms_per_frame (QP solve + squeeze or force "
             "QP); dex-retargeting: its per-frame call; frame-weighted in aggregates",
             "five_finger_hands": "hands with five distinct robot fingers",
+            "human_replay": "the force pipeline run again on the same (pair, object) with "
+            f"MPC seed {REPLAY_SEED} (the first: 0); replay.force_* score its per-finger "
+            "forces against the first simulation's as force_metrics scores a robot's "
+            "(retarget.run.human_replay_metrics)",
+            "human_replay_ceiling": "replay_ceiling: over a variant's successful runs with a "
+            "scored replay, the replay's correlations on the fingers each run scores (and the "
+            "run's load shares), next to the variant's own on the same runs",
         },
         "targets": checks,
         "aggregates": {
             "per_scope": scope_aggs,
             "per_hand": per_hand,
             "heavy_vs_light": hv,
+            "human_heavy_vs_light": human_hv,
             "by_contact_error": by_contact,
+            "human_replay_ceiling": None
+            if ceilings is None
+            else {"per_scope": ceilings, "per_hand": per_hand_ceiling},
         },
         "runs": rows,
         "wall_time_s": time.perf_counter() - t_start,
@@ -1331,6 +1585,13 @@ def main(argv: list[str] | None = None) -> int:
         help="reuse human simulations stored here (written on first use): ablations of the "
         "retargeting skip the force pipeline",
     )
+    ap.add_argument(
+        "--human-replay",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help=f"simulate each human demonstration again at MPC seed {REPLAY_SEED} and score "
+        "its forces against the first's: the force correlation's ceiling (mpc tracker only)",
+    )
     a = ap.parse_args(argv)
     from retarget.refine import RefineConfig
     from retarget.retargeter import RetargetConfig
@@ -1354,6 +1615,7 @@ def main(argv: list[str] | None = None) -> int:
         overrides=overrides,
         refine_overrides=refine_overrides,
         human_cache=a.human_cache,
+        human_replay=a.human_replay,
     )
     run_benchmark(cfg)
     return 0

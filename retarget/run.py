@@ -156,7 +156,97 @@ human's at 0.82, the 42 lighter touches (mean 0.02–0.53 N) at 0.30: the plan a
 (plan vs human 0.92 on Shadow and Ability), but the servos replayed open loop lose the contact
 when the object drifts from its planned pose (Shadow on cylinder1h/ring: the ring finger 0.1–4.5
 mm off the simulated cylinder, the cylinder 1–2 cm from the human's; README, force
-preservation)."""
+preservation). The force pipeline run again with another MPC seed (``human_replay_metrics``, the
+same runs and fingers, 2026-12-06) reproduces its own load-bearing profiles at 0.89 and its light
+touches at 0.47."""
+
+
+def finger_force_profiles(H: np.ndarray, R: np.ndarray, fingers) -> dict:
+    """Per finger, how the contact-force magnitudes ``R`` (T, F) [N] reproduce the reference
+    ``H`` (T, F) [N] (columns named by ``fingers``): ``correlation`` over the frames where
+    either exceeds 0.05 N, ``profile_correlation`` over every frame, ``relative_magnitude_error``
+    (Σ|r − h| / Σh over the frames the reference carries force), both mean forces and the
+    finger's ``load_share`` of the reference's summed mean force. A finger the reference never
+    loads (0.05 N on at most 2 frames) has no profile to match: its three scores are ``None``;
+    a reproduction that never presses where it does scores 0 (``_corr``)."""
+    H = np.asarray(H, dtype=np.float64)
+    R = np.asarray(R, dtype=np.float64)
+    if H.ndim != 2 or H.shape != R.shape or H.shape[1] != len(fingers):
+        raise RetargetError(
+            f"force profiles: reference {H.shape} and reproduction {R.shape} must both be "
+            f"(frames, {len(fingers)} fingers)"
+        )
+    per = {}
+    total = float(H.mean(axis=0).sum())
+    for i, f in enumerate(fingers):
+        h, r = H[:, i], R[:, i]
+        hm = float(h.mean())
+        on = (h > 0.05) | (r > 0.05)
+        held = h > 0.05  # where the reference finger carries force
+        used = held.sum() > 2
+        rel = float(np.abs(r[held] - h[held]).sum() / h[held].sum()) if used else None
+        per[f] = {
+            "correlation": _corr(h[on], r[on]) if used else None,
+            "profile_correlation": _corr(h, r) if used else None,
+            "relative_magnitude_error": rel,
+            "human_force_mean_n": hm,
+            "robot_force_mean_n": float(r.mean()),
+            "load_share": hm / total if total > 0 else None,
+        }
+    return per
+
+
+def correlation_means(per: dict) -> dict:
+    """The four means of :func:`finger_force_profiles`' correlations over the scored fingers
+    (all, and the load-bearing ones: ``LOAD_BEARING_SHARE``); ``None`` where none is scored."""
+
+    def mean_of(key: str, load_bearing: bool = False) -> float | None:
+        vals = [
+            v[key]
+            for v in per.values()
+            if v[key] is not None and (not load_bearing or v["load_share"] >= LOAD_BEARING_SHARE)
+        ]
+        return float(np.mean(vals)) if vals else None
+
+    return {
+        "force_correlation_mean": mean_of("correlation"),
+        "force_profile_correlation_mean": mean_of("profile_correlation"),
+        "force_correlation_mean_load_bearing": mean_of("correlation", True),
+        "force_profile_correlation_mean_load_bearing": mean_of("profile_correlation", True),
+    }
+
+
+def human_replay_metrics(first, second, fingers=None) -> dict:
+    """How well a second force-pipeline simulation of the same demonstration (another random
+    seed of its sampling MPC) reproduces the first's per-finger forces, scored exactly as
+    :func:`force_metrics` scores a robot against the first: the ceiling a robot matched to one
+    simulation can be expected to reach, since the human's forces are themselves one sample.
+
+    ``first``, ``second``: force-annotated trajectories (``Trajectory.contacts``) of the same
+    demonstration; compared over their common frames (a simulation that lost the object stops
+    early). ``fingers``: human fingers to score (default the five). Returns
+    ``force_per_finger`` and the correlation means (the keys of :func:`force_metrics`).
+    """
+    from dexcanvas_core.trajectory import FORCE_GROUPS
+
+    fingers = tuple(FORCE_GROUPS[:5] if fingers is None else fingers)
+    bad = [f for f in fingers if f not in FORCE_GROUPS[:5]]
+    if bad:
+        raise RetargetError(f"unknown finger(s) {bad}; choose from {FORCE_GROUPS[:5]}")
+    for name, tr in (("first", first), ("second", second)):
+        if tr is None or tr.contacts is None:
+            raise RetargetError(
+                f"human replay: the {name} trajectory has no contact forces (run it through "
+                "the force pipeline first)"
+            )
+    T = min(first.num_frames, second.num_frames)
+    if T < 3:
+        raise RetargetError(f"human replay: {T} common frames, need at least 3")
+    cols = [FORCE_GROUPS.index(f) for f in fingers]
+    H = np.linalg.norm(first.contacts.finger_totals()[:T, cols], axis=2)
+    R = np.linalg.norm(second.contacts.finger_totals()[:T, cols], axis=2)
+    per = finger_force_profiles(H, R, fingers)
+    return {"force_per_finger": per, "frames": T, **correlation_means(per)}
 
 
 def force_metrics(robot, sim, human, retargeter) -> dict:
@@ -182,23 +272,7 @@ def force_metrics(robot, sim, human, retargeter) -> dict:
     # the robot finger each human finger drives (a gripper merges index and middle)
     col = [sim.fingers.index(retargeter.hand.fingers[f]) for f in retargeter.tip_human]
     R = np.linalg.norm(sim.finger_force_world[:, col], axis=2)
-    per = {}
-    total = float(H.mean(axis=0).sum())
-    for i, f in enumerate(retargeter.tip_human):
-        h, r = H[:, i], R[:, i]
-        hm = float(h.mean())
-        on = (h > 0.05) | (r > 0.05)
-        held = h > 0.05  # where the human finger carries force
-        used = held.sum() > 2
-        rel = float(np.abs(r[held] - h[held]).sum() / h[held].sum()) if used else None
-        per[f] = {
-            "correlation": _corr(h[on], r[on]) if used else None,
-            "profile_correlation": _corr(h, r) if used else None,
-            "relative_magnitude_error": rel,
-            "human_force_mean_n": hm,
-            "robot_force_mean_n": float(r.mean()),
-            "load_share": hm / total if total > 0 else None,
-        }
+    per = finger_force_profiles(H, R, retargeter.tip_human)
     human_total = human.contacts.finger_totals()[:, : len(FORCE_GROUPS)].sum(axis=1)
     robot_total = sim.finger_force_world.sum(axis=1)
     touch = np.linalg.norm(human_total, axis=1) > 0.05
@@ -214,20 +288,9 @@ def force_metrics(robot, sim, human, retargeter) -> dict:
     need = np.linalg.norm(robot.human_force.sum(axis=1), axis=1)
     ok = robot.wrench_shortfall <= np.maximum(0.1 * need, 0.05)
 
-    def mean_of(key: str, load_bearing: bool = False) -> float | None:
-        vals = [
-            v[key]
-            for v in per.values()
-            if v[key] is not None and (not load_bearing or v["load_share"] >= LOAD_BEARING_SHARE)
-        ]
-        return float(np.mean(vals)) if vals else None
-
     return {
         "force_per_finger": per,
-        "force_correlation_mean": mean_of("correlation"),
-        "force_profile_correlation_mean": mean_of("profile_correlation"),
-        "force_correlation_mean_load_bearing": mean_of("correlation", True),
-        "force_profile_correlation_mean_load_bearing": mean_of("profile_correlation", True),
+        **correlation_means(per),
         "object_force_error_mean_n": float(werr.mean()) if werr.size else None,
         "object_force_error_contact_frames_mean_n": float(werr_all.mean())
         if werr_all.size

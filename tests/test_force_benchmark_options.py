@@ -116,3 +116,95 @@ def test_targets_do_not_compare_with_a_variant_that_was_not_run():
     corr_e = next(c for c in fp.target_checks("five", rows, agg, fp.heavy_vs_light(rows))
                   if "successful (e)" in c["target"] and c["name"] == "correlation")  # fmt: skip
     assert corr_e["value"] == pytest.approx(0.85) and corr_e["met"] is True
+
+
+def test_replay_has_its_own_cache_key_and_the_first_keeps_its_own(traj):
+    first = fp.human_cache_key(traj, "cube2", "mpc")
+    assert fp.human_cache_key(traj, "cube2", "mpc", None) == first  # caches stay valid
+    replay = fp.human_cache_key(traj, "cube2", "mpc", fp.REPLAY_SEED)
+    assert replay != first and replay == fp.human_cache_key(traj, "cube2", "mpc", fp.REPLAY_SEED)
+    assert fp.human_sim_config("cube2", "mpc", fp.REPLAY_SEED).mpc.seed == fp.REPLAY_SEED
+    assert fp.BenchConfig().replays() and not fp.BenchConfig(human_tracker="open_loop").replays()
+    assert not fp.BenchConfig(human_replay=False).replays()
+
+
+def _finger(corr, profile, share):
+    return {"correlation": corr, "profile_correlation": profile, "load_share": share}
+
+
+def test_replay_ceiling_compares_the_same_runs_and_fingers():
+    """The ceiling covers only the variant's successful runs that have a scored replay, and
+    only the fingers each run scores (a four-finger hand's, with its load shares)."""
+    human = [
+        {"index": 0, "object_id": "cube2", "replay": {"force_per_finger": {
+            "thumb": _finger(0.9, 0.95, 0.5), "index": _finger(0.5, 0.7, 0.4),
+            "pinky": _finger(0.1, 0.2, 0.1)}}},
+        {"index": 1, "object_id": "cube2", "replay": {"success": False}},  # not scored
+        {"index": 2, "object_id": "cube2h", "replay": {"force_per_finger": {
+            "thumb": _finger(0.6, 0.8, 0.6), "index": _finger(None, None, 0.0)}}},
+    ]  # fmt: skip
+    base = {"hand": "leap", "variant": "d", "success": True}
+    rows = [
+        {**base, "index": 0, "object_id": "cube2",
+         "force_correlation_mean": 0.6, "force_profile_correlation_mean": 0.75,
+         "force_per_finger": {"thumb": _finger(0.8, 0.9, 0.55), "index": _finger(0.4, 0.6, 0.03),
+                              "middle": _finger(None, None, 0.0)}},
+        {**base, "index": 1, "object_id": "cube2", "force_per_finger": {
+            "thumb": _finger(0.8, 0.9, 1.0)}},  # its replay failed
+        {**base, "index": 2, "object_id": "cube2h", "force_per_finger": {
+            "thumb": _finger(0.2, 0.3, 1.0), "index": _finger(0.1, 0.1, 0.2)},
+         "force_correlation_mean": 0.15, "force_profile_correlation_mean": 0.2},
+        {**base, "index": 0, "object_id": "cube2", "success": False,
+         "force_per_finger": {"thumb": _finger(0.0, 0.0, 1.0)}},  # failed: not compared
+        {**base, "index": 0, "object_id": "cube2", "variant": "e", "success": True,
+         "force_per_finger": {"thumb": _finger(0.0, 0.0, 1.0)}},  # another variant
+    ]  # fmt: skip
+    for r in rows:
+        r.update(pair=f"p{r['index']}", object_variant="light", frames=10)
+    c = fp.replay_ceiling(rows, human, "d")
+    assert c["runs"] == 2
+    # run 0: thumb and index (the pinky is not the run's); run 2: the thumb only
+    assert c["replay"]["force_correlation_mean"] == pytest.approx(np.mean([(0.9 + 0.5) / 2, 0.6]))
+    assert c["replay"]["force_profile_correlation_mean"] == pytest.approx(
+        np.mean([(0.95 + 0.7) / 2, 0.8])
+    )
+    # load-bearing by the run's shares: run 0's index carries 3 % there, so the thumb only
+    assert c["replay"]["force_correlation_mean_load_bearing"] == pytest.approx(np.mean([0.9, 0.6]))
+    assert c["ours"]["force_correlation_mean"] == pytest.approx(np.mean([0.6, 0.15]))
+    ce = fp.replay_ceiling(rows, human, "e")  # (e)'s one successful run, its thumb
+    assert ce["runs"] == 1 and ce["replay"]["force_correlation_mean"] == pytest.approx(0.9)
+    # the targets carry it, and the table shows it
+    agg = fp.aggregate_variants(rows)
+    checks = fp.target_checks("four", rows, agg, fp.heavy_vs_light(rows), {"d": c})
+    prof = next(x for x in checks if "successful (d)" in x["target"] and x["name"] == "correlation")
+    assert prof["human_replay"] == c["replay"]["force_profile_correlation_mean"]
+    assert prof["same_runs"] == c["ours"]["force_profile_correlation_mean"]
+    assert prof["human_replay_runs"] == 2
+    e = next(x for x in checks if "successful (e)" in x["target"] and x["name"] == "correlation")
+    assert "human_replay" not in e  # no (e) ceiling given
+    from rich.console import Console
+
+    con = Console(record=True, width=200)
+    con.print(fp.targets_table("four", checks))
+    con.print(fp.variants_table("leap", agg, c))
+    text = con.export_text()
+    assert "human replay 0.81" in text and "same 2 runs: 0.47" in text
+    assert "human replay (MPC seed 1 vs 0)" in text
+
+
+def test_human_heavy_vs_light_counts_the_force_pipeline_and_its_replays():
+    human = [
+        {"index": 0, "object_variant": "light", "success": True, "replay": {"success": True}},
+        {"index": 0, "object_variant": "heavy", "success": True, "replay": {"success": False}},
+        {"index": 1, "object_variant": "light", "success": False},  # no replay: not reproduced
+        {"index": 1, "object_variant": "heavy", "success": True, "replay": {"success": True}},
+        {"index": 2, "object_variant": "light", "success": True, "replay": {"success": True}},
+    ]
+    hv = fp.human_heavy_vs_light(human)
+    assert hv["first"]["light_runs"] == 3 and hv["first"]["light_success_rate"] == 2 / 3
+    assert hv["first"]["heavy_success_rate"] == 1.0
+    assert hv["first"]["paired_runs"] == 2 and hv["first"]["paired_light_success_rate"] == 0.5
+    assert hv["replay"]["light_runs"] == 2 and hv["replay"]["light_success_rate"] == 1.0
+    assert hv["replay"]["heavy_success_rate"] == 0.5
+    assert hv["replay"]["paired_runs"] == 1  # only demonstration 0 was replayed with both
+    assert fp.human_heavy_vs_light([h for h in human if "replay" not in h])["replay"] is None

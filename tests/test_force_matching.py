@@ -771,3 +771,60 @@ def test_refinement_closing_step_moves_coupled_joints_with_their_servo():
         np.testing.assert_allclose(dM[t, cols, 6 + i], want, rtol=0.05, atol=1e-5)
         checked += 1
     assert checked >= 2
+
+
+def test_finger_force_profiles_score_a_reproduction_numerically():
+    """Per finger: a reproduction at twice the force correlates perfectly and is off by 100 %;
+    one that never presses scores 0; a finger the reference never loads is not scored."""
+    from retarget.run import correlation_means, finger_force_profiles
+
+    h = np.array([0.0, 0.0, 1.0, 2.0, 3.0, 2.0, 1.0, 0.0, 0.0, 0.0])
+    H = np.stack([h, h, 0.01 * h, 0.5 * h], axis=1)  # the third is a graze: ≤ 0.03 N
+    R = np.stack([2.0 * h, np.zeros_like(h), 0.01 * h, h[::-1]], axis=1)
+    per = finger_force_profiles(H, R, ("thumb", "index", "middle", "ring"))
+    assert per["thumb"]["correlation"] == pytest.approx(1.0)
+    assert per["thumb"]["profile_correlation"] == pytest.approx(1.0)
+    assert per["thumb"]["relative_magnitude_error"] == pytest.approx(1.0)
+    assert per["index"]["correlation"] == 0.0 and per["index"]["relative_magnitude_error"] == 1.0
+    assert per["middle"]["correlation"] is None and per["middle"]["profile_correlation"] is None
+    # the mirrored profile: over every frame, np.corrcoef's value
+    assert per["ring"]["profile_correlation"] == pytest.approx(np.corrcoef(h, h[::-1])[0, 1])
+    shares = [per[f]["load_share"] for f in per]
+    assert sum(shares) == pytest.approx(1.0) and shares[0] == pytest.approx(1 / 2.51)
+    m = correlation_means(per)
+    assert m["force_profile_correlation_mean"] == pytest.approx(
+        np.mean([1.0, 0.0, per["ring"]["profile_correlation"]])
+    )
+    # load-bearing (≥ 10 % of the force): thumb, index and ring; the graze is not scored
+    assert m["force_correlation_mean_load_bearing"] == pytest.approx(
+        np.mean([1.0, 0.0, per["ring"]["correlation"]])
+    )
+    with pytest.raises(RetargetError, match="must both be"):
+        finger_force_profiles(H, R[:, :3], ("thumb", "index", "middle", "ring"))
+
+
+def test_human_replay_is_scored_like_a_robot_against_the_first_simulation(human_with_forces):
+    """The same simulation reproduces itself exactly; one lagging by 5 frames (compared over
+    the common frames) does not; missing forces and unknown fingers are refused."""
+    from retarget.run import human_replay_metrics
+
+    h = human_with_forces
+    same = human_replay_metrics(h, h)
+    scored = {f: v for f, v in same["force_per_finger"].items() if v["correlation"] is not None}
+    assert len(scored) >= 2  # a tripod: thumb, index, middle
+    for v in scored.values():
+        assert v["correlation"] == pytest.approx(1.0)
+        assert v["relative_magnitude_error"] == pytest.approx(0.0)
+    assert same["force_profile_correlation_mean"] == pytest.approx(1.0)
+    lag = human_replay_metrics(h, h.slice(5, h.num_frames))
+    assert lag["frames"] == h.num_frames - 5
+    assert lag["force_profile_correlation_mean"] < 0.999
+    assert human_replay_metrics(h, h, fingers=("thumb",))["force_per_finger"].keys() == {"thumb"}
+    with pytest.raises(RetargetError, match="unknown finger"):
+        human_replay_metrics(h, h, fingers=("palm",))
+    bare = h.slice(0, h.num_frames)
+    bare.contacts = None
+    with pytest.raises(RetargetError, match="second trajectory has no contact forces"):
+        human_replay_metrics(h, bare)
+    with pytest.raises(RetargetError, match="common frames"):
+        human_replay_metrics(h, h.slice(0, 2))
