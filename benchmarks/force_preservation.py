@@ -1071,8 +1071,12 @@ def targets_table(scope: str, checks: list[dict]):
     return t
 
 
-def plot_success(per_hand: dict, scope_aggs: dict, path: Path) -> Path:
-    """Grouped bars: strict success [%] per hand (and per scope), one bar per variant."""
+def plot_success(
+    per_hand: dict, scope_aggs: dict, path: Path, ceilings: dict | None = None
+) -> Path:
+    """Grouped bars: strict success [%] per hand (and per scope), one bar per variant; with
+    ``ceilings`` (hand or scope → :func:`replay_ceiling` of (d)), a second panel: (d)'s force
+    profile correlation on its successful runs next to the human replay's on the same runs."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -1083,7 +1087,13 @@ def plot_success(per_hand: dict, scope_aggs: dict, path: Path) -> Path:
     run_v = list(RUN_VARIANTS)
     width = 0.8 / len(VARIANTS)
     x = np.arange(len(names))
-    fig, ax = plt.subplots(figsize=(max(6.0, 1.3 * len(names) + 2), 4.2))
+    size = (max(6.0, 1.3 * len(names) + 2), 4.2)
+    if ceilings:
+        fig, (ax, ax2) = plt.subplots(
+            2, 1, figsize=(size[0], 2 * size[1] + 0.8), gridspec_kw={"hspace": 0.55}
+        )
+    else:
+        fig, ax = plt.subplots(figsize=size)
     for k, v in enumerate(VARIANTS):
         xs = x - 0.4 + (k + 0.5) * width
         if v in NOT_IMPLEMENTED:
@@ -1122,6 +1132,8 @@ def plot_success(per_hand: dict, scope_aggs: dict, path: Path) -> Path:
     ax.set_ylabel("strict success [%] (no frame > 5 cm)")
     ax.set_title("force preservation: re-simulated strict success by variant and hand")
     ax.legend(fontsize=7, ncol=3, loc="upper center", bbox_to_anchor=(0.5, -0.1))
+    if ceilings:
+        _plot_ceiling(ax2, names, ceilings)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
@@ -1129,6 +1141,30 @@ def plot_success(per_hand: dict, scope_aggs: dict, path: Path) -> Path:
     plt.close(fig)
     os.replace(tmp, path)
     return path
+
+
+def _plot_ceiling(ax, names: list[str], ceilings: dict) -> None:
+    """(d)'s whole-demonstration force correlation and the human replay's, on the same runs."""
+    key = "force_profile_correlation_mean"
+    x = np.arange(len(names))
+    for k, (label, side, color) in enumerate(
+        (("(d) + forces", "ours", f"C{list(RUN_VARIANTS).index('d')}"),
+         (f"human replay (MPC seed {REPLAY_SEED} vs 0)", "replay", "0.55"))
+    ):  # fmt: skip
+        vals = [ceilings.get(n, {}).get(side, {}).get(key) for n in names]
+        bars = ax.bar(x - 0.2 + 0.4 * k, [v or 0.0 for v in vals], 0.4, label=label, color=color)
+        for b, v in zip(bars, vals, strict=True):
+            text = "–" if v is None else f"{v:.2f}"
+            xc = b.get_x() + b.get_width() / 2
+            ax.text(xc, b.get_height() + 0.01, text, ha="center", va="bottom", fontsize=6)
+    runs = [ceilings.get(n, {}).get("runs", 0) for n in names]
+    ax.set_xticks(x, [f"{n}\n({r} runs)" for n, r in zip(names, runs, strict=True)])
+    ax.axhline(TARGET_CORRELATION, color="k", lw=0.8, ls="--")
+    ax.text(-0.45, TARGET_CORRELATION + 0.01, f"target {TARGET_CORRELATION:g}", fontsize=7)
+    ax.set_ylim(0, 1.1)
+    ax.set_ylabel("force profile correlation")
+    ax.set_title("per-finger force correlation on (d)'s successful runs: ours and the human's own")
+    ax.legend(fontsize=7, ncol=2, loc="upper center", bbox_to_anchor=(0.5, -0.22))
 
 
 # ------------------------------------------------------------------------ human-sim cache
@@ -1414,8 +1450,14 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         console.print(contact_error_table(s_, tab))
     console.print(targets_table(target_scope, checks))
 
+    plot_ceilings = None
+    if ceilings is not None:
+        plot_ceilings = {**per_hand_ceiling, **{s: c["d"] for s, c in ceilings.items()}}
     plot = plot_success(
-        per_hand, {s: a for s, a in scope_aggs.items() if len(hands) > 1}, cfg.plot_path()
+        per_hand,
+        {s: a for s, a in scope_aggs.items() if len(hands) > 1},
+        cfg.plot_path(),
+        plot_ceilings,
     )
     doc = {
         "benchmark": "force_preservation",

@@ -132,7 +132,7 @@ def _finger(corr, profile, share):
     return {"correlation": corr, "profile_correlation": profile, "load_share": share}
 
 
-def test_replay_ceiling_compares_the_same_runs_and_fingers():
+def test_replay_ceiling_compares_the_same_runs_and_fingers(tmp_path):
     """The ceiling covers only the variant's successful runs that have a scored replay, and
     only the fingers each run scores (a four-finger hand's, with its load shares)."""
     human = [
@@ -190,6 +190,9 @@ def test_replay_ceiling_compares_the_same_runs_and_fingers():
     text = con.export_text()
     assert "human replay 0.81" in text and "same 2 runs: 0.47" in text
     assert "human replay (MPC seed 1 vs 0)" in text
+    # the plot's second panel: (d) against the replay per hand
+    png = fp.plot_success({"leap": agg}, {}, tmp_path / "fp.png", {"leap": c})
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and not list(tmp_path.glob(".*"))
 
 
 def test_human_heavy_vs_light_counts_the_force_pipeline_and_its_replays():
