@@ -128,6 +128,8 @@ from _common import (
 )
 from force_pipeline import _init_worker, _one_thread_env
 
+from retarget.run import HUMAN_REPLAY_SEED
+
 DEFAULT_OUT = Path(__file__).parent / "results" / "force_preservation.json"
 NOT_REQUESTED = "not requested (--variants)"
 TRACKERS = ("mpc", "open_loop")
@@ -165,9 +167,9 @@ TARGET_SUCCESS = 0.85
 TARGET_RATIO = 2.0
 TARGET_CORRELATION = 0.8
 TARGET_FORCE_PCT_WEIGHT = 0.15
-REPLAY_SEED = 1
-"""MPC seed of the human replay (``BenchConfig.human_replay``); the first simulation runs at
-``MPCConfig``'s default seed, 0."""
+REPLAY_SEED = HUMAN_REPLAY_SEED
+"""MPC seed of the human replay (``BenchConfig.human_replay``; ``retarget run --human-replay``'s);
+the first simulation runs at ``MPCConfig``'s default seed, 0."""
 
 
 @dataclass(frozen=True)

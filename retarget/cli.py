@@ -155,6 +155,12 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
         help="with --forces: press with X times the human's forces (a grip margin; default 1)",
     )
     p.add_argument(
+        "--human-replay",
+        action="store_true",
+        help="with --forces: simulate the human again with another MPC seed and score its "
+        "forces like the robot's (the force correlation's ceiling)",
+    )
+    p.add_argument(
         "--refine",
         action="store_true",
         help="if the re-simulation fails, refine the commands by sampling MPC on the robot",
@@ -211,6 +217,7 @@ def _plain_run_config(args: argparse.Namespace):
         refine=args.refine,
         refine_retries=args.refine_retries,
         force_scale=args.force_scale,
+        human_replay=args.human_replay,
         progress=not args.quiet,
     )
 

@@ -57,6 +57,11 @@ class RunConfig:
     force_scale: float = 1.0
     """Force matching presses with this multiple of the human's forces
     (``RetargetConfig.force_scale``: a grip margin); needs ``forces``."""
+    human_replay: bool = False
+    """Also run the force pipeline again at another seed of its sampling MPC
+    (``HUMAN_REPLAY_SEED``) and score its per-finger forces against the matched ones as the
+    robot's are (:func:`human_replay_metrics`): how well the human's own forces reproduce, the
+    ceiling of the robot's force correlation; needs ``forces``."""
     progress: bool = True
     """Show progress bars and the summary on the terminal."""
 
@@ -114,11 +119,18 @@ FORCE_CONTACT_TIMECONST = 0.005
 ``tests/test_force_matching.py``: soft default contacts lose ~25 % of the pressed force)."""
 
 
-def _human_forces(traj, pair, prog):
-    """Run the force pipeline on ``traj`` (with ``pair``'s object) for the human's forces."""
-    from dexcanvas_core.sim.pipeline import SimConfig, simulate
+HUMAN_REPLAY_SEED = 1
+"""MPC seed of the human replay (``RunConfig.human_replay``, the force-preservation benchmark's
+``--human-replay``); the force pipeline's first simulation runs at ``MPCConfig``'s default, 0."""
 
-    task = prog.task("human forces (force pipeline)", traj.num_frames)
+
+def _simulate_human(traj, pair, prog, label: str, mpc_seed: int | None = None):
+    """The force pipeline on ``traj`` with ``pair``'s object (at ``mpc_seed``, else the
+    defaults): ``(result, metrics)``."""
+    from dexcanvas_core.sim.pipeline import SimConfig, simulate
+    from dexcanvas_core.sim.tracker import MPCConfig
+
+    task = prog.task(label, traj.num_frames)
     done = [0]
 
     def step(n):
@@ -126,8 +138,16 @@ def _human_forces(traj, pair, prog):
         if task is not None:
             task(done[0], traj.num_frames)
 
-    res = simulate(traj, SimConfig(object_id=pair.object.id), progress=step)
-    m = {k: v for k, v in res.metrics.items() if k != "config"}
+    sim_cfg = SimConfig(object_id=pair.object.id)
+    if mpc_seed is not None:
+        sim_cfg = SimConfig(object_id=pair.object.id, mpc=MPCConfig(seed=mpc_seed))
+    res = simulate(traj, sim_cfg, progress=step)
+    return res, {k: v for k, v in res.metrics.items() if k != "config"}
+
+
+def _human_forces(traj, pair, prog):
+    """Run the force pipeline on ``traj`` (with ``pair``'s object) for the human's forces."""
+    res, m = _simulate_human(traj, pair, prog, "human forces (force pipeline)")
     if not res.success:
         raise RetargetError(
             f"the force pipeline could not reproduce this demonstration with {pair.object.id} "
@@ -135,6 +155,25 @@ def _human_forces(traj, pair, prog):
             "to match; try another --index, or run without --forces"
         )
     return res.trajectory, m
+
+
+def _human_replay(traj, pair, prog, fingers) -> dict:
+    """``RunConfig.human_replay``: the force pipeline again at ``HUMAN_REPLAY_SEED`` on the
+    force-annotated ``traj``, scored against its forces on ``fingers``; the replay's outcome
+    only when it did not reproduce the demonstration."""
+    res, m = _simulate_human(
+        traj, pair, prog, f"human replay (force pipeline, seed {HUMAN_REPLAY_SEED})",
+        HUMAN_REPLAY_SEED,
+    )  # fmt: skip
+    out = {
+        "mpc_seed": HUMAN_REPLAY_SEED,
+        "success": bool(res.success),
+        "failed_at_frame": m.get("failed_at_frame"),
+        "object_pos_err_max_m": m.get("object_pos_err_max_m"),
+    }
+    if res.success:
+        out.update(human_replay_metrics(traj, res.trajectory, fingers))
+    return out
 
 
 def _corr(a: np.ndarray, b: np.ndarray) -> float | None:
@@ -344,6 +383,11 @@ def run_retarget(cfg: RunConfig) -> dict:
             "--force-scale scales the human forces that force matching presses with: add "
             "--forces (or leave --force-scale out)"
         )
+    if cfg.human_replay and not cfg.forces:
+        raise RetargetError(
+            "--human-replay scores the human's forces against a second simulation of them, "
+            "for force matching: add --forces (or leave --human-replay out)"
+        )
     rcfg = RetargetConfig(
         backend=cfg.backend, force_matching=cfg.forces, force_scale=cfg.force_scale
     ).validate()
@@ -363,6 +407,9 @@ def run_retarget(cfg: RunConfig) -> dict:
             traj, human_sim = _human_forces(traj, pair, prog)
         retargeter = Retargeter(hand, geometry, rcfg)
         setup_s = time.perf_counter() - t0
+        replay = None
+        if cfg.human_replay:
+            replay = _human_replay(traj, pair, prog, retargeter.tip_human)
         robot = retargeter.retarget(traj, progress=prog.task("retargeting", traj.num_frames))
         vcfg = ValidateConfig(contact_timeconst=FORCE_CONTACT_TIMECONST if cfg.forces else None)
         sim = Resimulator(hand, geometry, vcfg).run(
@@ -403,6 +450,8 @@ def run_retarget(cfg: RunConfig) -> dict:
     if cfg.forces:
         metrics.update(force_metrics(robot, sim, traj, retargeter))
         metrics["human_force_pipeline"] = human_sim
+        if replay is not None:
+            metrics["human_replay"] = replay
     refined = None
     if cfg.refine and not sim.success:
         from retarget.refine import RefineConfig, refine
@@ -556,6 +605,16 @@ def _print_summary(m: dict, out_dir: Path) -> None:
             f"{_num(m['object_force_error_mean_n'])} N, wrench feasible "
             f"{100 * m['wrench_feasible_fraction']:.0f} % of contact frames",
         )
+    if (hr := m.get("human_replay")) is not None:
+        if hr["success"]:
+            text = (
+                f"correlation {_num(hr['force_profile_correlation_mean'])} (whole clip) / "
+                f"{_num(hr['force_correlation_mean'])} (contact frames): the human's forces "
+                "against themselves, the robot's ceiling"
+            )
+        else:
+            text = f"[red]lost the object at frame {hr['failed_at_frame']}[/red]: no ceiling"
+        t.add_row(f"human replay (MPC seed {hr['mpc_seed']})", text)
     if "refine" in m:
         r = m["refine"]
         ok = "[green]SUCCESS[/green]" if r["success"] else "[red]FAILED[/red]"

@@ -828,3 +828,38 @@ def test_human_replay_is_scored_like_a_robot_against_the_first_simulation(human_
         human_replay_metrics(h, bare)
     with pytest.raises(RetargetError, match="common frames"):
         human_replay_metrics(h, h.slice(0, 2))
+
+
+def test_cli_human_replay_scores_the_human_forces_against_themselves(
+    human_with_forces, tmp_path, capsys
+):
+    """``retarget run --forces --human-replay``: the force pipeline runs again at another MPC
+    seed, and metrics.json holds that replay scored against the matched forces on the hand's
+    fingers, beside the robot's; without --forces the option is refused before any work."""
+    import json
+
+    from dexcanvas_core.io import write_dataset
+    from retarget.cli import main
+    from retarget.run import HUMAN_REPLAY_SEED
+
+    src = tmp_path / "h.lance"
+    write_dataset([human_with_forces.slice(250, 370)], src)
+    out = tmp_path / "run"
+    rc = main(["run", "--hand", "allegro", "--pair", "cube2/tripod", "--dataset", str(src),
+               "--forces", "--human-replay", "--out", str(out)])  # fmt: skip
+    assert rc == 0
+    m = json.loads((out / "metrics.json").read_text())
+    hr = m["human_replay"]
+    assert hr["mpc_seed"] == HUMAN_REPLAY_SEED and hr["success"]
+    assert set(hr["force_per_finger"]) == set(m["force_per_finger"])  # the hand's fingers
+    assert hr["frames"] == 120
+    for key in ("force_profile_correlation_mean", "force_correlation_mean"):
+        assert -1.0 <= hr[key] <= 1.0 and -1.0 <= m[key] <= 1.0
+    # another sample of the same stochastic tracker: close to the first, not equal to it
+    assert 0.3 < hr["force_profile_correlation_mean"] < 0.9999
+    assert "human replay (MPC seed 1)" in capsys.readouterr().out
+    never = tmp_path / "never"
+    rc = main(["run", "--hand", "allegro", "--pair", "cube2/tripod", "--human-replay",
+               "--quiet", "--out", str(never)])  # fmt: skip
+    assert rc == 2 and not never.exists()
+    assert "add --forces" in capsys.readouterr().err
