@@ -1126,9 +1126,7 @@ def plot_success(
                 fontsize=6,
             )
     ax.axhline(100 * TARGET_SUCCESS, color="k", lw=0.8, ls="--")
-    ax.text(
-        len(names) - 0.5, 100 * TARGET_SUCCESS + 1, "target (d) or (e) 85 %", ha="right", fontsize=7
-    )
+    ax.text(-0.45, 100 * TARGET_SUCCESS + 1, "target (d) or (e) 85 %", fontsize=7)
     ax.set_xticks(x, names)
     ax.set_ylim(0, 110)
     ax.set_ylabel("strict success [%] (no frame > 5 cm)")
