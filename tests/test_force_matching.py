@@ -858,6 +858,22 @@ def test_cli_human_replay_scores_the_human_forces_against_themselves(
     # another sample of the same stochastic tracker: close to the first, not equal to it
     assert 0.3 < hr["force_profile_correlation_mean"] < 0.9999
     assert "human replay (MPC seed 1)" in capsys.readouterr().out
+    # the report shows both, per finger and for the run
+    from retarget.viz.report import force_notes, metrics_rows
+
+    notes = force_notes(m)
+    for f, text in notes.items():
+        r = hr["force_per_finger"][f]["profile_correlation"]
+        assert f"(human replay {r:.2f})" in text
+    rows = dict(metrics_rows(m))
+    label = "human replay (MPC seed 1): the human against itself"
+    assert rows[label] == (
+        f"{hr['force_profile_correlation_mean']:.2f} / {hr['force_correlation_mean']:.2f}"
+    )
+    assert main(["report", str(out), "--no-snapshots", "--renderer", "mujoco"]) == 0
+    assert label in (out / "report.html").read_text()
+    failed = {**m, "human_replay": {"mpc_seed": 1, "success": False, "failed_at_frame": 88}}
+    assert dict(metrics_rows(failed))[label] == "lost the object at frame 88"
     never = tmp_path / "never"
     rc = main(["run", "--hand", "allegro", "--pair", "cube2/tripod", "--human-replay",
                "--quiet", "--out", str(never)])  # fmt: skip

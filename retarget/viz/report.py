@@ -191,12 +191,16 @@ def _section(run_dir: Path, cfg: ReportConfig) -> RunSection:
 def force_notes(m: dict) -> dict[str, str]:
     """Per human finger of a force-matched run (``metrics.json``'s ``force_per_finger``): its
     force profile correlation with the human's and its share of the hand's load, for the force
-    plot's panels; empty for other runs and for fingers the human never loaded."""
+    plot's panels (with the human replay's, ``--human-replay``, where the run has one); empty
+    for other runs and for fingers the human never loaded."""
     out = {}
+    replay = (m.get("human_replay") or {}).get("force_per_finger") or {}
     for f, v in (m.get("force_per_finger") or {}).items():
         if v.get("profile_correlation") is None:
             continue
         text = f"profile correlation {v['profile_correlation']:.2f}"
+        if (r := replay.get(f, {}).get("profile_correlation")) is not None:
+            text += f" (human replay {r:.2f})"
         if v.get("load_share") is not None:
             text += f" · {100 * v['load_share']:.0f} % of the human hand's force"
         out[f] = text
@@ -319,6 +323,24 @@ def metrics_rows(m: dict) -> list[tuple[str, str]]:
                 "mean contact force per robot finger",
                 ", ".join(f"{html.escape(k)} {v:.2f} N" for k, v in forces.items()),
             )
+        )
+    if m.get("force_profile_correlation_mean") is not None:
+        rows.append(
+            (
+                "force matching: correlation with the human (whole clip / contact frames)",
+                f"{_fmt(m['force_profile_correlation_mean'], digits=2)} / "
+                f"{_fmt(m.get('force_correlation_mean'), digits=2)}",
+            )
+        )
+    if (hr := m.get("human_replay")) is not None:
+        value = (
+            f"{_fmt(hr.get('force_profile_correlation_mean'), digits=2)} / "
+            f"{_fmt(hr.get('force_correlation_mean'), digits=2)}"
+            if hr.get("success")
+            else f"lost the object at frame {_fmt(hr.get('failed_at_frame'), digits=0)}"
+        )
+        rows.append(
+            (f"human replay (MPC seed {hr.get('mpc_seed')}): the human against itself", value)
         )
     return rows
 
