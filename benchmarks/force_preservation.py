@@ -17,7 +17,7 @@ variants stay empty.
 
 Human replay (``--no-human-replay`` to skip; ``mpc`` only): every (pair, object) the force
 pipeline reproduced is simulated a second time with another seed of its sampling MPC
-(``REPLAY_SEED``), and the replay's per-finger forces are scored against the first
+(``HUMAN_REPLAY_SEED``), and the replay's per-finger forces are scored against the first
 simulation's exactly as a robot's are (``retarget.run.human_replay_metrics``). The human's
 forces are one sample of a stochastic tracker: a robot matched to that sample cannot be
 expected to correlate with it better than another equally valid sample does, so the replay
@@ -128,7 +128,7 @@ from _common import (
 )
 from force_pipeline import _init_worker, _one_thread_env
 
-from retarget.run import HUMAN_REPLAY_SEED
+from retarget.run import HUMAN_REPLAY_SEED, human_sim_config
 
 DEFAULT_OUT = Path(__file__).parent / "results" / "force_preservation.json"
 NOT_REQUESTED = "not requested (--variants)"
@@ -167,9 +167,6 @@ TARGET_SUCCESS = 0.85
 TARGET_RATIO = 2.0
 TARGET_CORRELATION = 0.8
 TARGET_FORCE_PCT_WEIGHT = 0.15
-REPLAY_SEED = HUMAN_REPLAY_SEED
-"""MPC seed of the human replay (``BenchConfig.human_replay``; ``retarget run --human-replay``'s);
-the first simulation runs at ``MPCConfig``'s default seed, 0."""
 
 
 @dataclass(frozen=True)
@@ -210,7 +207,7 @@ class BenchConfig:
     tracker) simulated once is read back on later runs instead of simulated again."""
     human_replay: bool = True
     """Simulate every (pair, object) a second time with another seed of the force pipeline's
-    sampling MPC (``REPLAY_SEED``) and score its per-finger forces against the first's as the
+    sampling MPC (``HUMAN_REPLAY_SEED``) and score its per-finger forces against the first's as the
     robots' are (``retarget.run.human_replay_metrics``): the ceiling of the force correlation
     (``--no-human-replay``: skip; never with the deterministic ``open_loop`` tracker)."""
 
@@ -281,17 +278,6 @@ def object_plan(pair, heavy: bool) -> list[dict]:
 # ------------------------------------------------------------------------------------ workers
 def _error(e: BaseException) -> dict:
     return {"error": f"{type(e).__name__}: {e}", "traceback": traceback.format_exc(limit=4)}
-
-
-def human_sim_config(object_id: str, tracker: str, mpc_seed: int | None = None):
-    """The force pipeline's ``SimConfig`` of one human simulation: the defaults, or with the
-    sampling MPC at ``mpc_seed`` (the human replay)."""
-    from dexcanvas_core.sim.pipeline import SimConfig
-    from dexcanvas_core.sim.tracker import MPCConfig
-
-    if mpc_seed is None:
-        return SimConfig(tracker=tracker, object_id=object_id)
-    return SimConfig(tracker=tracker, object_id=object_id, mpc=MPCConfig(seed=mpc_seed))
 
 
 def _human_sim(args) -> dict:
@@ -574,31 +560,43 @@ def aggregate_variants(rows: list[dict]) -> dict:
     return {v: out[v] for v in VARIANTS}
 
 
+def _light_heavy(recs: list[dict], ok, key) -> dict:
+    """Success rates (``ok(record)``) of light-object and heavy-object records, over all of them
+    and over the heavy variants whose light object was run too (``paired``: same ``key``)."""
+    light = [r for r in recs if r["object_variant"] == "light"]
+    heavy = [r for r in recs if r["object_variant"] == "heavy"]
+    light_by = {key(r): r for r in light}
+    paired = [
+        (light_by[key(h)], h)
+        for h in heavy
+        if h.get("heavy_version_of") is not None and key(h) in light_by
+    ]
+
+    def rate(rs: list[dict]) -> float | None:
+        return float(np.mean([bool(ok(r)) for r in rs])) if rs else None
+
+    return {
+        "light_runs": len(light),
+        "light_success_rate": rate(light),
+        "heavy_runs": len(heavy),
+        "heavy_success_rate": rate(heavy),
+        "paired_runs": len(paired),
+        "paired_light_success_rate": rate([li for li, _ in paired]),
+        "paired_heavy_success_rate": rate([h for _, h in paired]),
+    }
+
+
 def heavy_vs_light(rows: list[dict]) -> dict:
     """Per variant: strict success of light-object and heavy-object runs, over all runs and over
     the (hand, pair)s run with both a light object and its heavy variant (``paired``)."""
-    out = {}
-    for v in RUN_VARIANTS:
-        rs = [r for r in rows if r["variant"] == v and "skipped" not in r]
-        light = [r for r in rs if r["object_variant"] == "light"]
-        heavy = [r for r in rs if r["object_variant"] == "heavy"]
-        light_by = {(r["hand"], r["pair"]): r for r in light}
-        pl, ph = [], []
-        for h in heavy:
-            li = light_by.get((h["hand"], h["pair"]))
-            if h["heavy_version_of"] is not None and li is not None:
-                pl.append(li)
-                ph.append(h)
-        out[v] = {
-            "light_runs": len(light),
-            "light_success_rate": _rate(light),
-            "heavy_runs": len(heavy),
-            "heavy_success_rate": _rate(heavy),
-            "paired_runs": len(ph),
-            "paired_light_success_rate": _rate(pl),
-            "paired_heavy_success_rate": _rate(ph),
-        }
-    return out
+    return {
+        v: _light_heavy(
+            [r for r in rows if r["variant"] == v and "skipped" not in r],
+            lambda r: r.get("success"),
+            lambda r: (r["hand"], r["pair"]),
+        )
+        for v in RUN_VARIANTS
+    }
 
 
 def human_heavy_vs_light(human: list[dict]) -> dict:
@@ -606,49 +604,30 @@ def human_heavy_vs_light(human: list[dict]) -> dict:
     (``first``), and of those that reproduced their demonstration, the share the replay
     reproduced again (``replay``); ``paired``: the demonstrations simulated with both a light
     object and its heavy variant."""
-
-    def rates(recs: list[dict], ok) -> dict:
-        light = [ok(r) for r in recs if r["object_variant"] == "light"]
-        heavy = [ok(r) for r in recs if r["object_variant"] == "heavy"]
-        by_index = {}
-        for r in recs:
-            by_index.setdefault(r["index"], {})[r["object_variant"]] = ok(r)
-        pairs = [v for v in by_index.values() if len(v) == 2]
-        return {
-            "light_runs": len(light),
-            "light_success_rate": float(np.mean(light)) if light else None,
-            "heavy_runs": len(heavy),
-            "heavy_success_rate": float(np.mean(heavy)) if heavy else None,
-            "paired_runs": len(pairs),
-            "paired_light_success_rate": float(np.mean([v["light"] for v in pairs]))
-            if pairs
-            else None,
-            "paired_heavy_success_rate": float(np.mean([v["heavy"] for v in pairs]))
-            if pairs
-            else None,
-        }
-
     replayed = [r for r in human if "replay" in r]
+
+    def by_demo(r: dict) -> int:
+        return r["index"]
+
     return {
-        "first": rates(human, lambda r: bool(r["success"])),
-        "replay": rates(replayed, lambda r: bool(r["replay"]["success"])) if replayed else None,
+        "first": _light_heavy(human, lambda r: r["success"], by_demo),
+        "replay": _light_heavy(replayed, lambda r: r["replay"]["success"], by_demo)
+        if replayed
+        else None,
     }
 
 
 def replay_record(first, res: dict) -> dict:
-    """A human simulation's ``replay`` entry: the replay's outcome (``res``: a
-    :func:`_human_sim` result at ``REPLAY_SEED``) and, when it too reproduced the
-    demonstration, its per-finger forces scored against the first simulation's (``first``)
-    by ``retarget.run.human_replay_metrics``."""
-    from retarget.run import human_replay_metrics
+    """A human simulation's ``replay`` entry: ``retarget.run.human_replay_outcome`` of the
+    replay (``res``: a :func:`_human_sim` result at ``HUMAN_REPLAY_SEED``) against the first
+    simulation's trajectory ``first``, with its CPU time, cache flag and error."""
+    from retarget.run import human_replay_outcome
 
     rec = res["record"]
-    keep = ("mpc_seed", "success", "failed_at_frame", "object_pos_err_max_m", "compute_s",
-            "cached", "error")  # fmt: skip
-    out = {k: rec.get(k) for k in keep}
-    if res["trajectory"] is not None:
-        out.update(human_replay_metrics(first, res["trajectory"]))
-    return out
+    return {
+        **human_replay_outcome(first, res["trajectory"], rec),
+        **{k: rec.get(k) for k in ("compute_s", "cached", "error")},
+    }
 
 
 CORRELATION_KEYS = ("force_profile_correlation_mean", "force_correlation_mean",
@@ -803,7 +782,7 @@ def target_checks(
             "human_replay_runs": c["runs"],
         }
 
-    checks = [
+    return [
         {
             "scope": scope,
             "name": "success",
@@ -876,7 +855,6 @@ def target_checks(
             else bool(e["object_force_error_pct_weight_successful"] <= TARGET_FORCE_PCT_WEIGHT),
         },
     ]
-    return checks
 
 
 # ------------------------------------------------------------------------------------- output
@@ -942,7 +920,7 @@ def variants_table(title: str, agg: dict, ceiling: dict | None = None):
     if ceiling is not None and ceiling["runs"]:
         c = ceiling["replay"]
         t.add_row(
-            f"human replay (MPC seed {REPLAY_SEED} vs 0)",
+            f"human replay (MPC seed {HUMAN_REPLAY_SEED} vs 0)",
             f"{ceiling['runs']} (d) ok",
             *["–"] * 4,
             f"{_f(c['force_profile_correlation_mean'], fmt='.2f')} / "
@@ -968,7 +946,7 @@ def human_table(sims: list[dict]):
     replays = any("replay" in s for s in sims)
     cols = ("pair", "object", "mass kg", "reproduced", "max err cm", "CPU s")
     if replays:
-        cols += (f"replay (seed {REPLAY_SEED})", "replay F corr")
+        cols += (f"replay (seed {HUMAN_REPLAY_SEED})", "replay F corr")
     for c in cols:
         t.add_column(c, justify="left" if c in ("pair", "object") else "right", no_wrap=True)
     for s in sims:
@@ -1010,7 +988,7 @@ def heavy_table(hv_by_scope: dict, human_hv: dict | None = None):
         title="heavy vs light: strict success %",
         caption="all: every light / heavy run; paired: the same (hand, pair) with the light "
         "object and its heavy variant (n pairs). human: the force pipeline's own success (the "
-        f"replay at MPC seed {REPLAY_SEED}: of the simulations that reproduced their "
+        f"replay at MPC seed {HUMAN_REPLAY_SEED}: of the simulations that reproduced their "
         "demonstration)",
     )
     for c in ("scope", "variant", "light %", "heavy %", "paired light %", "paired heavy %", "n"):
@@ -1035,7 +1013,7 @@ def heavy_table(hv_by_scope: dict, human_hv: dict | None = None):
             continue
         t.add_row(
             "human",
-            "force pipeline" if name == "first" else f"replay (seed {REPLAY_SEED})",
+            "force pipeline" if name == "first" else f"replay (seed {HUMAN_REPLAY_SEED})",
             f"{_f(h['light_success_rate'], 100, '.0f')} ({h['light_runs']})",
             f"{_f(h['heavy_success_rate'], 100, '.0f')} ({h['heavy_runs']})",
             _f(h["paired_light_success_rate"], 100, ".0f"),
@@ -1149,7 +1127,7 @@ def _plot_ceiling(ax, names: list[str], ceilings: dict) -> None:
     x = np.arange(len(names))
     for k, (label, side, color) in enumerate(
         (("(d) + forces", "ours", f"C{list(RUN_VARIANTS).index('d')}"),
-         (f"human replay (MPC seed {REPLAY_SEED} vs 0)", "replay", "0.55"))
+         (f"human replay (MPC seed {HUMAN_REPLAY_SEED} vs 0)", "replay", "0.55"))
     ):  # fmt: skip
         vals = [ceilings.get(n, {}).get(side, {}).get(key) for n in names]
         bars = ax.bar(x - 0.2 + 0.4 * k, [v or 0.0 for v in vals], 0.4, label=label, color=color)
@@ -1241,7 +1219,7 @@ def run_jobs(cfg: BenchConfig, demos: list, plans: list, hands: list, console):
     jobs, over ``cfg.workers`` spawned one-thread processes. Returns ``(human_records, rows,
     skipped)``: one record per human simulation, one row per hand × (pair, object) × variant,
     and the (hand, pair)s a hand cannot perform. With ``cfg.replays()``, each human simulation
-    that reproduced its demonstration is simulated again at ``REPLAY_SEED`` and its record
+    that reproduced its demonstration is simulated again at ``HUMAN_REPLAY_SEED`` and its record
     gets a ``replay`` (:func:`replay_record`)."""
     from retarget.errors import RetargetError
     from retarget.run import check_pair
@@ -1301,7 +1279,7 @@ def run_jobs(cfg: BenchConfig, demos: list, plans: list, hands: list, console):
                 firsts[i, k] = (rec, res["trajectory"])
                 n_jobs[0] += 1
                 prog.update(task, total=n_jobs[0])
-                again = cached_or_submit("replay", i, k, REPLAY_SEED)
+                again = cached_or_submit("replay", i, k, HUMAN_REPLAY_SEED)
                 if again is not None:
                     prog.advance(task)
                     on_replay(i, k, again)
@@ -1382,7 +1360,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         + (f"; RetargetConfig {cfg.overrides}" if cfg.overrides else "")
         + (f"; RefineConfig {cfg.refine_overrides}" if cfg.refine_overrides else "")
         + (f"; human cache {cfg.human_cache}" if cfg.human_cache is not None else "")
-        + (f"; human replay at MPC seed {REPLAY_SEED}" if cfg.replays() else "")
+        + (f"; human replay at MPC seed {HUMAN_REPLAY_SEED}" if cfg.replays() else "")
     )
 
     human, rows, skipped = run_jobs(cfg, demos, plans, hands, console)
@@ -1528,7 +1506,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
             "QP); dex-retargeting: its per-frame call; frame-weighted in aggregates",
             "five_finger_hands": "hands with five distinct robot fingers",
             "human_replay": "the force pipeline run again on the same (pair, object) with "
-            f"MPC seed {REPLAY_SEED} (the first: 0); replay.force_* score its per-finger "
+            f"MPC seed {HUMAN_REPLAY_SEED} (the first: 0); replay.force_* score its per-finger "
             "forces against the first simulation's as force_metrics scores a robot's "
             "(retarget.run.human_replay_metrics)",
             "human_replay_ceiling": "replay_ceiling: over a variant's successful runs with a "
@@ -1631,7 +1609,7 @@ def main(argv: list[str] | None = None) -> int:
         "--human-replay",
         action=argparse.BooleanOptionalAction,
         default=True,
-        help=f"simulate each human demonstration again at MPC seed {REPLAY_SEED} and score "
+        help=f"simulate each human demonstration again at MPC seed {HUMAN_REPLAY_SEED} and score "
         "its forces against the first's: the force correlation's ceiling (mpc tracker only)",
     )
     a = ap.parse_args(argv)

@@ -124,11 +124,21 @@ HUMAN_REPLAY_SEED = 1
 ``--human-replay``); the force pipeline's first simulation runs at ``MPCConfig``'s default, 0."""
 
 
+def human_sim_config(object_id: str, tracker: str = "mpc", mpc_seed: int | None = None):
+    """The force pipeline's ``SimConfig`` for one human simulation with ``object_id``: the
+    defaults, or the sampling MPC at ``mpc_seed`` (the human replay)."""
+    from dexcanvas_core.sim.pipeline import SimConfig
+    from dexcanvas_core.sim.tracker import MPCConfig
+
+    if mpc_seed is None:
+        return SimConfig(tracker=tracker, object_id=object_id)
+    return SimConfig(tracker=tracker, object_id=object_id, mpc=MPCConfig(seed=mpc_seed))
+
+
 def _simulate_human(traj, pair, prog, label: str, mpc_seed: int | None = None):
     """The force pipeline on ``traj`` with ``pair``'s object (at ``mpc_seed``, else the
     defaults): ``(result, metrics)``."""
-    from dexcanvas_core.sim.pipeline import SimConfig, simulate
-    from dexcanvas_core.sim.tracker import MPCConfig
+    from dexcanvas_core.sim.pipeline import simulate
 
     task = prog.task(label, traj.num_frames)
     done = [0]
@@ -138,10 +148,7 @@ def _simulate_human(traj, pair, prog, label: str, mpc_seed: int | None = None):
         if task is not None:
             task(done[0], traj.num_frames)
 
-    sim_cfg = SimConfig(object_id=pair.object.id)
-    if mpc_seed is not None:
-        sim_cfg = SimConfig(object_id=pair.object.id, mpc=MPCConfig(seed=mpc_seed))
-    res = simulate(traj, sim_cfg, progress=step)
+    res = simulate(traj, human_sim_config(pair.object.id, mpc_seed=mpc_seed), progress=step)
     return res, {k: v for k, v in res.metrics.items() if k != "config"}
 
 
@@ -165,14 +172,22 @@ def _human_replay(traj, pair, prog, fingers) -> dict:
         traj, pair, prog, f"human replay (force pipeline, seed {HUMAN_REPLAY_SEED})",
         HUMAN_REPLAY_SEED,
     )  # fmt: skip
+    return human_replay_outcome(traj, res.trajectory if res.success else None, m, fingers)
+
+
+def human_replay_outcome(first, second, sim_metrics: dict, fingers=None) -> dict:
+    """The human replay's entry (``metrics.json``'s and the benchmark's ``human_replay``): its
+    outcome (``sim_metrics``, the force pipeline's) and, when it reproduced the demonstration
+    (``second``, its force-annotated trajectory; ``None`` when it did not), its forces scored
+    against ``first``'s by :func:`human_replay_metrics`."""
     out = {
         "mpc_seed": HUMAN_REPLAY_SEED,
-        "success": bool(res.success),
-        "failed_at_frame": m.get("failed_at_frame"),
-        "object_pos_err_max_m": m.get("object_pos_err_max_m"),
+        "success": second is not None,
+        "failed_at_frame": sim_metrics.get("failed_at_frame"),
+        "object_pos_err_max_m": sim_metrics.get("object_pos_err_max_m"),
     }
-    if res.success:
-        out.update(human_replay_metrics(traj, res.trajectory, fingers))
+    if second is not None:
+        out.update(human_replay_metrics(first, second, fingers))
     return out
 
 

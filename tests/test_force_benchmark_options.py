@@ -121,9 +121,13 @@ def test_targets_do_not_compare_with_a_variant_that_was_not_run():
 def test_replay_has_its_own_cache_key_and_the_first_keeps_its_own(traj):
     first = fp.human_cache_key(traj, "cube2", "mpc")
     assert fp.human_cache_key(traj, "cube2", "mpc", None) == first  # caches stay valid
-    replay = fp.human_cache_key(traj, "cube2", "mpc", fp.REPLAY_SEED)
-    assert replay != first and replay == fp.human_cache_key(traj, "cube2", "mpc", fp.REPLAY_SEED)
-    assert fp.human_sim_config("cube2", "mpc", fp.REPLAY_SEED).mpc.seed == fp.REPLAY_SEED
+    replay = fp.human_cache_key(traj, "cube2", "mpc", fp.HUMAN_REPLAY_SEED)
+    assert replay != first and replay == fp.human_cache_key(
+        traj, "cube2", "mpc", fp.HUMAN_REPLAY_SEED
+    )
+    assert (
+        fp.human_sim_config("cube2", "mpc", fp.HUMAN_REPLAY_SEED).mpc.seed == fp.HUMAN_REPLAY_SEED
+    )
     assert fp.BenchConfig().replays() and not fp.BenchConfig(human_tracker="open_loop").replays()
     assert not fp.BenchConfig(human_replay=False).replays()
 
@@ -196,12 +200,13 @@ def test_replay_ceiling_compares_the_same_runs_and_fingers(tmp_path):
 
 
 def test_human_heavy_vs_light_counts_the_force_pipeline_and_its_replays():
+    light, heavy = {"object_variant": "light"}, {"object_variant": "heavy", "heavy_version_of": "c"}
     human = [
-        {"index": 0, "object_variant": "light", "success": True, "replay": {"success": True}},
-        {"index": 0, "object_variant": "heavy", "success": True, "replay": {"success": False}},
-        {"index": 1, "object_variant": "light", "success": False},  # no replay: not reproduced
-        {"index": 1, "object_variant": "heavy", "success": True, "replay": {"success": True}},
-        {"index": 2, "object_variant": "light", "success": True, "replay": {"success": True}},
+        {"index": 0, **light, "success": True, "replay": {"success": True}},
+        {"index": 0, **heavy, "success": True, "replay": {"success": False}},
+        {"index": 1, **light, "success": False},  # no replay: not reproduced
+        {"index": 1, **heavy, "success": True, "replay": {"success": True}},
+        {"index": 2, **light, "success": True, "replay": {"success": True}},
     ]
     hv = fp.human_heavy_vs_light(human)
     assert hv["first"]["light_runs"] == 3 and hv["first"]["light_success_rate"] == 2 / 3
