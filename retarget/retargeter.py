@@ -143,7 +143,7 @@ class RetargetConfig:
     w_joints: float = 1.0
     w_vectors: float = 1.0
     w_contacts: float = 200.0
-    contact_tangent_weight: float = 0.05
+    contact_tangent_weight: float = 0.01
     """Weight factor of a contact's error *along* the object's surface (at the human's contact
     point) relative to its error across it: the robot link must touch the surface (full
     ``w_contacts``) and is pulled towards the human's point with ``w_contacts`` × this
@@ -155,7 +155,22 @@ class RetargetConfig:
     to the human's point) grows 1.7 → 5.4 mm. Force matching (variant (d) of
     benchmarks/force_preservation.py on its cached human simulations, five-finger hands and
     LEAP, 135 runs), strict / loose: 1 → 42 / 81 %, 0.2 → 44 / 84 %, 0.1 → 45 / 88 %,
-    0.05 → 49 / 89 %, 0.03 → 44 / 88 %, 0 → 42 / 87 %."""
+    0.05 → 49 / 89 %, 0.03 → 44 / 88 %, 0 → 42 / 87 %; so force matching keeps 0.05
+    (``force_contact_tangent_weight``).
+    Without force matching, benchmarks/retarget_speed_quality.py, all 7 hands × 20 pairs
+    (2026-12-06; ``--set contact_tangent_weight=X``), 0.05 / 0.01 / 0: keypoint error 15.94 /
+    15.42 / 15.34 mm (dex-retargeting 15.55), strict re-sim success 48.9 / 48.1 / 44.4 %, loose
+    77.8 / 81.5 / 83.7 %, contact-point error 8.2 / 10.9 / 13.0 mm, penetration 1.51 / 1.47 /
+    1.66 mm. On contact frames the tangential pull was what kept the keypoints off dex-
+    retargeting's (Ability: 16.5 against 11.8 mm there, 11.1 against 11.9 on the other frames);
+    so 0.01."""
+    force_contact_tangent_weight: float = 0.05
+    """``contact_tangent_weight`` when ``force_matching`` is on. The force QP places the human's
+    forces at the human's contact points, so the robot's contacts are held nearer to them.
+    Measured 2026-12-06, variant (d) of benchmarks/force_preservation.py on its cached human
+    simulations (all 7 hands, 180 runs), 0.05 → 0.01: 100 → 95 runs lifted (Allegro 16 → 13,
+    LEAP 17 → 15, Panda 7 → 5; the five-finger hands 60 → 62 of 108), and the heavy cube of
+    ``retarget run --hand allegro --pair cube2H/tripod --forces`` drops (9.5 cm)."""
     w_posture: float = 1e-4
     w_smooth: float = 0.05
     damping: float = 1e-5
@@ -378,6 +393,10 @@ class RetargetConfig:
             v = getattr(self, k)
             if not (np.isfinite(v) and v >= 0):
                 raise RetargetError(f"{k} must be finite and >= 0, got {v}")
+        for k in ("contact_tangent_weight", "force_contact_tangent_weight"):
+            v = getattr(self, k)
+            if not (np.isfinite(v) and v >= 0):
+                raise RetargetError(f"{k} must be finite and >= 0 (1: isotropic), got {v}")
         if not (np.isfinite(self.force_scale) and self.force_scale > 0):
             raise RetargetError(
                 f"force_scale must be finite and > 0 (1: the human's forces), got "
@@ -543,7 +562,9 @@ class Retargeter:
                 self.nq,
                 c.w_contacts,
                 part_geoms=part_geoms,
-                tangent_weight=c.contact_tangent_weight,
+                tangent_weight=(
+                    c.force_contact_tangent_weight if c.force_matching else c.contact_tangent_weight
+                ),
             )
         q0 = hand.default_qpos(m)[: self.nq]
         self.q_default = q0

@@ -524,14 +524,20 @@ def test_joint_limit_margin_keeps_finger_joints_inside_their_ranges():
     its range (at most a quarter of it), the wrist's coordinates untouched; the grip's servo
     commands may still use the whole range. On the built-in cube2/tripod Allegro's middle
     distal joint rests on its extension limit without the margin (its pad on the cube's top
-    edge) and 0.1 rad inside it with."""
+    edge, pulled along the surface towards the human's contact point at force matching's
+    ``contact_tangent_weight``) and 0.1 rad inside it with."""
     from dexcanvas_core.loaders.selection import load_demonstration
 
     traj = load_demonstration("cube2/tripod").slice(250, 400)
     geom = object_geometry(traj.object.name)
     hand = get_hand("allegro")
-    plain = Retargeter(hand, geom, RetargetConfig(joint_limit_margin=0.0))
-    inner = Retargeter(hand, geom, RetargetConfig(joint_limit_margin=0.1))
+    ctw = RetargetConfig().force_contact_tangent_weight
+    plain = Retargeter(
+        hand, geom, RetargetConfig(joint_limit_margin=0.0, contact_tangent_weight=ctw)
+    )
+    inner = Retargeter(
+        hand, geom, RetargetConfig(joint_limit_margin=0.1, contact_tangent_weight=ctw)
+    )
     j7 = plain.kin.joint_names.index("joint_7.0")
     q0 = plain.retarget(traj).q
     assert np.isclose(q0[:, j7], plain.lower[j7], atol=1e-3).mean() > 0.9
@@ -676,6 +682,21 @@ def test_surface_scaling_keeps_touching_keypoints_touching():
         RetargetConfig(keypoint_scaling="centre").validate()
     with pytest.raises(RetargetError, match="max_wrist_speed"):
         RetargetConfig(max_wrist_speed=0.0).validate()
+
+
+def test_force_matching_takes_its_own_contact_tangent_weight():
+    """Kinematic retargeting lets contacts slide along the surface (``contact_tangent_weight``);
+    force matching, which places the human's forces at the human's contact points, holds them
+    nearer (``force_contact_tangent_weight``). Bad values are refused by name."""
+    hand, geom = get_hand("shadow"), object_geometry("cube2")
+    cfg = RetargetConfig(contact_tangent_weight=0.02, force_contact_tangent_weight=0.3)
+    assert Retargeter(hand, geom, cfg).contacts.tangent_weight == 0.02
+    fm = dataclasses.replace(cfg, force_matching=True)
+    assert Retargeter(hand, geom, fm).contacts.tangent_weight == 0.3
+    for k in ("contact_tangent_weight", "force_contact_tangent_weight"):
+        for v in (-0.1, np.nan):
+            with pytest.raises(RetargetError, match=k):
+                RetargetConfig(**{k: v}).validate()
 
 
 def test_predicted_warm_start_takes_fewer_steps_without_overshooting():
