@@ -319,16 +319,16 @@ FORCE_KEYS = (
 """A row's force columns (:func:`retarget.run.force_metrics`, + % of the weight)."""
 
 
-def _force_columns(robot_d, sim_res, human, retargeter, variant: str) -> dict:
+def _force_columns(human_force, robot_d, sim_res, human, retargeter, variant: str) -> dict:
     """``force_metrics`` of one variant's re-simulation against the human's forces: every
-    variant is compared with the human per-finger forces (d)'s retargeter mapped onto this
-    hand's fingers (``robot_d.human_force``)."""
+    variant is compared with the human per-finger forces mapped onto this hand's fingers
+    (``human_force``, ``Retargeter.human_finger_forces``; (d)'s ``robot_d.human_force``)."""
     from retarget.run import force_metrics
 
     robot = robot_d
-    if variant != "d":  # only the human side and the QP's shortfall are read from the robot
+    if variant != "d":  # only the human side is read from the robot (no force QP ran)
         robot = SimpleNamespace(
-            human_force=robot_d.human_force, wrench_shortfall=robot_d.wrench_shortfall
+            human_force=human_force, wrench_shortfall=np.zeros(human_force.shape[0])
         )
     m = force_metrics(robot, sim_res, human, retargeter)
     if variant != "d":
@@ -468,13 +468,17 @@ def _hand_job(args) -> list[dict]:
             except Exception as e:
                 row.update(_error(e))
             row["wall_s"] = time.perf_counter() - t0
-        # force columns: every re-simulated variant against the human's forces
-        if robot_d is not None:
+        # force columns: every re-simulated variant against the human's forces (also without
+        # (d): an ablation of (c) alone, `--variants c`, is compared with the human too)
+        if human is not None and sims:
+            rt_f = retargeters.get("d") or retargeters.get("c") or retargeters.get("b")
+            rt_f = rt_f or Retargeter(hand, geom, configs["c"])
+            human_force = rt_f.human_finger_forces(human)
             for v, sim_res in sims.items():
                 if sim_res is None or "error" in rows[v]:
                     continue
                 try:
-                    fm = _force_columns(robot_d, sim_res, human, retargeters["d"], v)
+                    fm = _force_columns(human_force, robot_d, sim_res, human, rt_f, v)
                     err = fm["object_force_error_mean_n"]
                     fm["object_force_error_pct_weight"] = None if err is None else err / weight_n
                     rows[v].update(fm)

@@ -1076,8 +1076,10 @@ class Retargeter:
             "p_obj": p,
         }
 
-    def _force_targets(self, traj: Trajectory) -> dict:
-        """Per-frame human forces of the robot's fingers and the object wrench to reproduce."""
+    def human_finger_forces(self, traj: Trajectory) -> np.ndarray:
+        """(T, F, 3) [N, world]: the human's summed contact force on the object of the human
+        finger each robot fingertip stands for (``tip_human`` order; a gripper's merged finger
+        repeats), from the force pipeline's contact records."""
         from dexcanvas_core.trajectory import FORCE_GROUPS
 
         c = traj.contacts
@@ -1087,10 +1089,14 @@ class Retargeter:
                 "has none: run it through the force pipeline first (dexcanvas simulate), or use "
                 "retarget run --forces, which does"
             )
+        groups = c.finger_totals().astype(np.float64)  # (T, 6, 3) on the object, world
+        return np.stack([groups[:, FORCE_GROUPS.index(f)] for f in self.tip_human], axis=1)
+
+    def _force_targets(self, traj: Trajectory) -> dict:
+        """Per-frame human forces of the robot's fingers and the object wrench to reproduce."""
+        human = self.human_finger_forces(traj)
         kp, tau_max = self._servo_gains()
         T, F = traj.num_frames, len(self.tip_sites)
-        groups = c.finger_totals().astype(np.float64)  # (T, 6, 3) on the object, world
-        human = np.stack([groups[:, FORCE_GROUPS.index(f)] for f in self.tip_human], axis=1)
         return {
             "mode": "human",
             "kp": kp,

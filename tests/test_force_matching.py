@@ -879,3 +879,38 @@ def test_cli_human_replay_scores_the_human_forces_against_themselves(
                "--quiet", "--out", str(never)])  # fmt: skip
     assert rc == 2 and not never.exists()
     assert "add --forces" in capsys.readouterr().err
+
+
+def test_force_benchmark_scores_every_variant_against_the_human_without_d(human_with_forces):
+    """``benchmarks/force_preservation.py --variants c``: (c)'s force columns come from the
+    human's forces mapped onto the hand (``Retargeter.human_finger_forces``), the same numbers
+    as when (d) runs beside it; (d)'s own mapping is that one too."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import force_preservation as fp
+
+    from dexcanvas_core.demos.geometry import object_geometry
+    from retarget.hands import get_hand
+    from retarget.retargeter import Retargeter
+
+    h = human_with_forces.slice(250, 400)
+    base = {"hand": "shadow", "index": 0, "pair": "cube2/tripod", "object_id": "cube2"}
+    base.update(object_variant="light", frames=h.num_frames, human_forces=True)
+    alone = {r["variant"]: r for r in fp._hand_job((base, h, h, "free", ("c",), {}, {}))}
+    both = {r["variant"]: r for r in fp._hand_job((base, h, h, "free", ("c", "d"), {}, {}))}
+    for k in ("force_profile_correlation_mean", "force_correlation_mean", "contact_recall"):
+        assert alone["c"][k] is not None
+        assert alone["c"][k] == pytest.approx(both["c"][k])
+    assert alone["c"]["force_per_finger"] == both["c"]["force_per_finger"]
+    assert alone["c"]["wrench_feasible_fraction"] is None  # the force QP's: (d) only
+    assert both["d"]["wrench_feasible_fraction"] is not None
+    rt = Retargeter(get_hand("shadow"), object_geometry("cube2"))
+    F = rt.human_finger_forces(h)
+    assert F.shape == (h.num_frames, len(rt.tip_sites), 3)
+    assert np.linalg.norm(F, axis=2).max() > 0.5  # a tripod presses
+    bare = h.slice(0, h.num_frames)
+    bare.contacts = None
+    with pytest.raises(RetargetError, match="force pipeline first"):
+        rt.human_finger_forces(bare)
