@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from dexcanvas_core.demos.feasibility import spread_pairs as select_pairs  # the suite's order
+from retarget.overrides import parse_override  # noqa: F401 (the benchmarks' --set type)
 
 GENERATION_ATTEMPTS = 3
 """Seeds tried per pair (``seed + i + 1000·attempt``) before a pair is given up."""
@@ -107,23 +108,6 @@ def atomic_write_json(path: Path, obj) -> None:
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(json.dumps(obj, indent=2, default=json_default))
     os.replace(tmp, path)
-
-
-def parse_override(text: str) -> tuple[str, object]:
-    """``"name=value"`` → ``(name, value)``, the value a Python literal (``2``, ``True``,
-    ``(0.001, 0.004)``, ``None``); an ``argparse`` type for ``--set``."""
-    import argparse
-    import ast
-
-    name, sep, value = text.partition("=")
-    if not sep or not name.strip():
-        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
-    try:
-        return name.strip(), ast.literal_eval(value.strip())
-    except (ValueError, SyntaxError):
-        raise argparse.ArgumentTypeError(
-            f"{name.strip()}: {value.strip()!r} is not a Python literal (e.g. 2.0, True, None)"
-        ) from None
 
 
 def config_overrides(pairs, config_cls, option: str = "--set") -> dict:

@@ -709,6 +709,65 @@ def by_contact_error(rows: list[dict]) -> dict:
     return out
 
 
+WRENCH_FEASIBLE = 0.9
+"""A run counts as one whose load the hand can carry when (d)'s force QP produced the required
+object wrench on at least this share of its contact frames (``wrench_feasible_fraction``)."""
+
+
+def heavy_vs_light_by_wrench(rows: list[dict]) -> dict:
+    """Light and heavy strict success of (d) and (e), split by whether (d)'s force QP could
+    produce the object wrench the human's forces make (friction cones at the retargeted
+    contacts, the servos' torque limits) on at least ``WRENCH_FEASIBLE`` of the contact frames:
+    where the grasp cannot carry a heavy object, no tracking of it will. Which limit binds
+    (the contacts' placement or the servos) is not split.
+    ``{variant: {"feasible" | "short": _light_heavy(...)}}``, (e) split by its (d) run's."""
+    frac = {
+        (r["hand"], r["index"], r["object_id"]): r.get("wrench_feasible_fraction")
+        for r in rows
+        if r["variant"] == "d" and "skipped" not in r and "error" not in r
+    }
+    out = {}
+    for v in ("d", "e"):
+        rs = [r for r in rows if r["variant"] == v and "skipped" not in r]
+        f = [frac.get((r["hand"], r["index"], r["object_id"])) for r in rs]
+        out[v] = {
+            name: _light_heavy(
+                [r for r, x in zip(rs, f, strict=True) if x is not None and keep(x)],
+                lambda r: r.get("success"),
+                lambda r: (r["hand"], r["pair"]),
+            )
+            for name, keep in (
+                ("feasible", lambda x: x >= WRENCH_FEASIBLE),
+                ("short", lambda x: x < WRENCH_FEASIBLE),
+            )
+        }
+    return out
+
+
+def wrench_table(scope: str, table: dict):
+    from rich.table import Table
+
+    t = Table(
+        title=f"{scope}: light / heavy strict success % by whether the retargeted grasp can carry "
+        "the load",
+        caption=f"can carry: (d)'s force QP produced the human's object wrench on ≥ "
+        f"{100 * WRENCH_FEASIBLE:.0f} % of the contact frames (friction cones at the retargeted "
+        "contacts, the servos' torque limits); (runs)",
+    )
+    for c in ("variant", "wrench", "light %", "heavy %"):
+        t.add_column(c, justify="left" if c in ("variant", "wrench") else "right", no_wrap=True)
+    for v in ("d", "e"):
+        for name, label in (("feasible", "can carry"), ("short", "falls short")):
+            h = table[v][name]
+            t.add_row(
+                LABELS[v],
+                label,
+                f"{_f(h['light_success_rate'], 100, '.0f')} ({h['light_runs']})",
+                f"{_f(h['heavy_success_rate'], 100, '.0f')} ({h['heavy_runs']})",
+            )
+    return t
+
+
 def contact_error_table(scope: str, table: dict):
     from rich.table import Table
 
@@ -1391,6 +1450,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
     scope_aggs = {s: aggregate_variants(rs) for s, rs in scopes.items()}
     hv = {s: heavy_vs_light(rs) for s, rs in scopes.items()}
     by_contact = {s: by_contact_error(rs) for s, rs in scopes.items()}
+    by_wrench = {s: heavy_vs_light_by_wrench(rs) for s, rs in scopes.items()}
     target_scope = FIVE_FINGER if five else ALL_HANDS
     ceilings = per_hand_ceiling = None
     if cfg.replays():
@@ -1426,6 +1486,11 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         )
     human_hv = human_heavy_vs_light(human)
     console.print(heavy_table(hv, human_hv))
+    if "d" in cfg.computed_variants():
+        for s_, tab in by_wrench.items():
+            if s_ == ALL_HANDS and len(hands) == 1:
+                continue
+            console.print(wrench_table(s_, tab))
     for s_, tab in by_contact.items():
         if s_ == ALL_HANDS and len(hands) == 1:
             continue
@@ -1509,6 +1574,10 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
             "ms_per_frame": "ours: RobotTrajectory.ms_per_frame (QP solve + squeeze or force "
             "QP); dex-retargeting: its per-frame call; frame-weighted in aggregates",
             "five_finger_hands": "hands with five distinct robot fingers",
+            "heavy_vs_light_by_wrench": "light / heavy strict success of (d) and (e), split "
+            "by (d)'s wrench_feasible_fraction >= WRENCH_FEASIBLE (feasible) or below (short): "
+            "whether the force QP could produce the human's object wrench at the retargeted "
+            "contacts within the servos' torque limits",
             "human_replay": "the force pipeline run again on the same (pair, object) with "
             f"MPC seed {HUMAN_REPLAY_SEED} (the first: 0); replay.force_* score its per-finger "
             "forces against the first simulation's as force_metrics scores a robot's "
@@ -1522,6 +1591,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
             "per_scope": scope_aggs,
             "per_hand": per_hand,
             "heavy_vs_light": hv,
+            "heavy_vs_light_by_wrench": by_wrench,
             "human_heavy_vs_light": human_hv,
             "by_contact_error": by_contact,
             "human_replay_ceiling": None

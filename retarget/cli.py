@@ -173,6 +173,14 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
         help="times the refinement backtracks 0.5 s (× attempt) when it loses the object "
         "(default 4; 0: one attempt)",
     )
+    p.add_argument(
+        "--set",
+        action="append",
+        type=_override,
+        metavar="NAME=VALUE",
+        help="change a RetargetConfig field (repeatable), e.g. --set w_contacts=100 --set "
+        "contact_tangent_weight=0.05; recorded in metrics.json (retarget_overrides)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     p.add_argument(
         "--snapshot",
@@ -185,6 +193,12 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
         default="auto",
         help="renderer of the --snapshot stills (default: Chromium if installed, else MuJoCo)",
     )
+
+
+def _override(text: str):
+    from retarget.overrides import parse_override
+
+    return parse_override(text)
 
 
 @dataclass(frozen=True)
@@ -218,6 +232,7 @@ def _plain_run_config(args: argparse.Namespace):
         refine_retries=args.refine_retries,
         force_scale=args.force_scale,
         human_replay=args.human_replay,
+        overrides=dict(args.set or ()),
         progress=not args.quiet,
     )
 

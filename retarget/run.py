@@ -18,7 +18,7 @@ import json
 import logging
 import os
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Literal
 
@@ -62,6 +62,10 @@ class RunConfig:
     (``HUMAN_REPLAY_SEED``) and score its per-finger forces against the matched ones as the
     robot's are (:func:`human_replay_metrics`): how well the human's own forces reproduce, the
     ceiling of the robot's force correlation; needs ``forces``."""
+    overrides: dict = field(default_factory=dict)
+    """``RetargetConfig`` fields changed from their defaults (``--set NAME=VALUE``), e.g.
+    ``{"w_contacts": 100.0}``; the run's own options (``backend``, ``forces``, ``force_scale``)
+    are set by their fields, not here."""
     progress: bool = True
     """Show progress bars and the summary on the terminal."""
 
@@ -385,12 +389,46 @@ def _atomic_write_text(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
+# RetargetConfig fields a run sets through its own options, not ``--set``
+_RUN_OPTIONS = {
+    "backend": "--backend",
+    "force_matching": "--forces",
+    "force_scale": "--force-scale",
+}
+
+
+def retarget_config(cfg: RunConfig):
+    """The run's ``RetargetConfig``: the defaults, ``cfg.overrides``, then the run's own
+    options; an unknown field, one of the run's options or a value the config refuses is a
+    ``RetargetError`` naming it."""
+    from retarget.retargeter import RetargetConfig
+
+    names = {f.name for f in fields(RetargetConfig)}
+    over = dict(cfg.overrides)
+    unknown = sorted(set(over) - names)
+    if unknown:
+        raise RetargetError(
+            f"--set: unknown RetargetConfig field(s) {', '.join(unknown)}; available: "
+            f"{', '.join(sorted(names - set(_RUN_OPTIONS)))}"
+        )
+    own = sorted(set(over) & set(_RUN_OPTIONS))
+    if own:
+        uses = "; ".join(f"{k} is the run's own option, use {_RUN_OPTIONS[k]}" for k in own)
+        raise RetargetError(f"--set: {uses}")
+    try:
+        return RetargetConfig(
+            **over, backend=cfg.backend, force_matching=cfg.forces, force_scale=cfg.force_scale
+        ).validate()
+    except (RetargetError, TypeError, ValueError) as e:
+        raise RetargetError(f"--set {over}: {e}") from None
+
+
 def run_retarget(cfg: RunConfig) -> dict:
     """Retarget, re-simulate and write the outputs; return the metrics dict."""
     from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.taxonomy import Pair
     from retarget.hands import get_hand
-    from retarget.retargeter import RetargetConfig, Retargeter
+    from retarget.retargeter import Retargeter
     from retarget.validate import Resimulator, ValidateConfig
 
     if cfg.force_scale != 1.0 and not cfg.forces:
@@ -403,9 +441,7 @@ def run_retarget(cfg: RunConfig) -> dict:
             "--human-replay scores the human's forces against a second simulation of them, "
             "for force matching: add --forces (or leave --human-replay out)"
         )
-    rcfg = RetargetConfig(
-        backend=cfg.backend, force_matching=cfg.forces, force_scale=cfg.force_scale
-    ).validate()
+    rcfg = retarget_config(cfg)
     pair = Pair.parse(cfg.pair)
     hand = get_hand(cfg.hand)
     check_pair(hand, pair.manipulation_type)
@@ -458,6 +494,7 @@ def run_retarget(cfg: RunConfig) -> dict:
         "ms_per_frame": robot.ms_per_frame,
         "setup_s": setup_s,
         "retarget_config": asdict(retargeter.cfg),
+        "retarget_overrides": dict(cfg.overrides),
         "demonstration_of": substituted or str(pair),
         "forces": cfg.forces,
         "force_scale": cfg.force_scale if cfg.forces else None,
@@ -648,6 +685,10 @@ def _print_summary(m: dict, out_dir: Path) -> None:
                 f"{_num(rf['force_correlation_mean'])} (contact frames), object force error "
                 f"{_num(rf['object_force_error_mean_n'])} N",
             )
+    if m.get("retarget_overrides"):
+        t.add_row(
+            "settings (--set)", ", ".join(f"{k}={v!r}" for k, v in m["retarget_overrides"].items())
+        )
     t.add_row("speed", f"{m['ms_per_frame']:.2f} ms/frame ({m['backend']})")
     t.add_row("written", f"{out_dir}/robot_trajectory.npz, metrics.json")
     Console().print(t)

@@ -1,4 +1,5 @@
-"""``benchmarks/force_preservation.py``: success by contact error, from hand-made rows."""
+"""``benchmarks/force_preservation.py``: success by contact error and light / heavy success
+by wrench feasibility, from hand-made rows."""
 
 from __future__ import annotations
 
@@ -7,7 +8,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
-from force_preservation import by_contact_error, contact_error_table
+from force_preservation import (
+    WRENCH_FEASIBLE,
+    by_contact_error,
+    contact_error_table,
+    heavy_vs_light_by_wrench,
+    wrench_table,
+)
 
 
 def _row(variant, index, success, contact_err=None, **extra):
@@ -32,6 +39,46 @@ def test_runs_are_binned_by_variant_d_contact_error():
     assert c["0–2 mm"] == (2, 0.0) and c["2–5 mm"] == (1, 1.0) and c["> 10 mm"] == (0, None)
     # (e)'s run 9 has no (d) row: in no bin
     assert sum(b["runs"] for b in t["e"]) == 4
+
+
+def test_light_and_heavy_are_split_by_d_wrench_feasibility():
+    """(d)'s ``wrench_feasible_fraction`` puts each (hand, pair, object) on one side of
+    ``WRENCH_FEASIBLE``; (e) follows its (d) run; a run without (d) or without the fraction is
+    on neither side; light and heavy are counted apart, with their pairing."""
+
+    def row(variant, index, oid, success, frac=None, **extra):
+        heavy = oid.endswith("h")
+        r = _row(variant, index, success, pair=f"p{index}", **extra)
+        r.update(object_id=oid, object_variant="heavy" if heavy else "light")
+        r["heavy_version_of"] = oid[:-1] if heavy else None
+        if frac is not None:
+            r["wrench_feasible_fraction"] = frac
+        return r
+
+    hi, lo = WRENCH_FEASIBLE, WRENCH_FEASIBLE - 0.01
+    rows = [
+        row("d", 0, "cube2", True, hi), row("d", 0, "cube2h", True, hi),
+        row("d", 1, "cube2", True, lo), row("d", 1, "cube2h", False, 0.3),
+        row("d", 2, "cube2", False, 1.0), row("d", 3, "cube2h", False),  # no fraction
+        row("e", 1, "cube2h", True), row("e", 2, "cube2", True), row("e", 7, "cube2", True),
+        row("d", 4, "cube2", False, skipped="no human forces"),
+    ]  # fmt: skip
+    t = heavy_vs_light_by_wrench(rows)
+    f, s = t["d"]["feasible"], t["d"]["short"]
+    assert (f["light_runs"], f["light_success_rate"]) == (2, 0.5)
+    assert (f["heavy_runs"], f["heavy_success_rate"]) == (1, 1.0)
+    assert (f["paired_runs"], f["paired_light_success_rate"]) == (1, 1.0)
+    assert (s["light_runs"], s["light_success_rate"]) == (1, 1.0)
+    assert (s["heavy_runs"], s["heavy_success_rate"]) == (1, 0.0)
+    e = t["e"]
+    assert e["short"]["heavy_runs"] == 1 and e["short"]["heavy_success_rate"] == 1.0
+    assert e["feasible"]["light_runs"] == 1 and e["feasible"]["heavy_runs"] == 0
+    from rich.console import Console
+
+    console = Console(width=160, record=True)
+    console.print(wrench_table("shadow", t))
+    text = console.export_text()
+    assert "can carry" in text and "falls short" in text and "50 (2)" in text
 
 
 def test_contact_error_table_renders_every_bin():

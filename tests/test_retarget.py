@@ -321,12 +321,49 @@ def test_cli_run_writes_outputs(small_dataset, tmp_path, capsys):
         (["--hand", "shadow", "--pair", "cube2/tripd"], "did you mean 'tripod'"),
         (["--hand", "shadow", "--pair", "cube2"], "cube2/tripod"),
         (["--hand", "panda", "--pair", "sphere1/rolling"], "cannot perform 'rolling'"),
+        (
+            ["--hand", "shadow", "--pair", "cube2/tripod", "--set", "w_contact=1"],
+            "unknown RetargetConfig field(s) w_contact; available:",
+        ),
+        (
+            ["--hand", "shadow", "--pair", "cube2/tripod", "--set", "force_matching=True"],
+            "force_matching is the run's own option, use --forces",
+        ),
+        (
+            ["--hand", "shadow", "--pair", "cube2/tripod", "--set", "w_contacts=-1"],
+            "weight w_contacts must be finite and >= 0",
+        ),
+        (
+            ["--hand", "shadow", "--pair", "cube2/tripod", "--set", "iterations=0"],
+            "iterations must be >= 1",
+        ),
     ],
 )
 def test_cli_run_errors(argv, message, small_dataset, capsys):
     assert main(["run", *argv, "--dataset", str(small_dataset), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "retarget run: error:" in err and message in err
+
+
+def test_cli_run_set_changes_the_retargeting_and_is_recorded(small_dataset, tmp_path, capsys):
+    """``retarget run --set NAME=VALUE`` reaches the retargeter (a contact weight 200× weaker
+    moves the links' contact points by millimetres), and metrics.json and the summary
+    say what was changed; a malformed pair is argparse's usage error."""
+    base = ["run", "--hand", "shadow", "--pair", "cube2/tripod", "--dataset", str(small_dataset)]
+    assert main([*base, "--out", str(tmp_path / "a"), "--quiet"]) == 0
+    argv = [*base, "--out", str(tmp_path / "b"), "--set", "w_contacts=1.0", "--set", "iterations=5"]
+    assert main(argv) == 0
+    assert "w_contacts=1.0, iterations=5" in capsys.readouterr().out
+    a = json.loads((tmp_path / "a" / "metrics.json").read_text())
+    b = json.loads((tmp_path / "b" / "metrics.json").read_text())
+    assert a["retarget_overrides"] == {}
+    assert b["retarget_overrides"] == {"w_contacts": 1.0, "iterations": 5}
+    assert b["retarget_config"]["w_contacts"] == 1.0 and b["retarget_config"]["iterations"] == 5
+    assert abs(b["contact_err_mean_m"] - a["contact_err_mean_m"]) > 1e-3
+    with pytest.raises(SystemExit) as e:
+        main([*base, "--set", "w_contacts"])
+    assert e.value.code == 2
+    assert "expected NAME=VALUE, got 'w_contacts'" in capsys.readouterr().err
 
 
 def test_cli_run_refuses_negative_refine_retries(capsys):
