@@ -914,3 +914,37 @@ def test_force_benchmark_scores_every_variant_against_the_human_without_d(human_
     bare.contacts = None
     with pytest.raises(RetargetError, match="force pipeline first"):
         rt.human_finger_forces(bare)
+
+
+def test_force_matching_backs_unloaded_touching_fingers_off_the_surface(human_with_forces):
+    """A finger the captured hand touches the object with while the human's simulated finger
+    presses nothing is commanded ``idle_contact_clearance`` off the surface (its servo presses
+    nowhere the human did not); frames without such a finger are commanded as without it."""
+    from dexcanvas_core.demos.geometry import object_geometry
+    from retarget.hands import get_hand
+    from retarget.retargeter import RetargetConfig, Retargeter
+
+    traj = human_with_forces.slice(200, 450)
+    hand, geom = get_hand("shadow"), object_geometry("cube2")
+    rt = Retargeter(hand, geom, RetargetConfig(force_matching=True, idle_contact_clearance=0.001))
+    off = Retargeter(hand, geom, RetargetConfig(force_matching=True, idle_contact_clearance=None))
+    out, ref = rt.retarget(traj), off.retarget(traj)
+    tg = rt.human_targets(traj)
+    idle = tg["contact_active"] & (np.linalg.norm(out.human_force, axis=2) <= 1e-3)
+    assert idle.sum() >= 20  # the middle finger grazes the cube on 40-odd frames here
+    np.testing.assert_allclose(out.q, ref.q)  # the kinematic solution is the same
+    d_cmd, d_q = [], []
+    for t, f in zip(*np.nonzero(idle), strict=True):
+        rt.scene.set_object_pose(traj.object.pos[t], traj.object.rot_aa[t])
+        rt.contacts.set_contacts(
+            tg["contact_active"][t], tg["contact_points"][t], tg["contact_part"][t]
+        )
+        d_cmd.append(rt.contacts.finger_distances(out.q_command[t])[f])
+        d_q.append(rt.contacts.finger_distances(out.q[t])[f])
+    assert np.median(d_q) < 0.0008  # the solution leaves them on the surface
+    assert np.percentile(d_cmd, 5) > 0.0009  # the command backs them out to ~1 mm (first order)
+    plain = ~idle.any(axis=1)
+    np.testing.assert_allclose(out.q_command[plain], ref.q_command[plain], atol=1e-12)
+    assert not np.allclose(out.q_command[~plain], ref.q_command[~plain])
+    with pytest.raises(RetargetError, match="idle_contact_clearance"):
+        RetargetConfig(idle_contact_clearance=-0.001).validate()
