@@ -113,23 +113,15 @@ def atomic_write_json(path: Path, obj) -> None:
 def config_overrides(pairs, config_cls, option: str = "--set") -> dict:
     """``option`` (``--set``) pairs ``[(name, value)]`` as keyword arguments of the dataclass
     ``config_cls``: an unknown name, or values its ``validate()`` refuses, exit with the
-    message before any run."""
-    import dataclasses
+    message before any run (``retarget.overrides.build_config``)."""
+    from retarget.errors import RetargetError
+    from retarget.overrides import build_config
 
-    fields = {f.name for f in dataclasses.fields(config_cls)}
     out = dict(pairs or ())
-    bad = sorted(set(out) - fields)
-    if bad:
-        raise SystemExit(
-            f"{option}: unknown {config_cls.__name__} field(s) {', '.join(bad)}; available: "
-            f"{', '.join(sorted(fields))}"
-        )
     try:
-        cfg = config_cls(**out)
-        if hasattr(cfg, "validate"):
-            cfg.validate()
-    except Exception as e:  # the config's own checks, e.g. a negative weight
-        raise SystemExit(f"{option}: {config_cls.__name__} refuses {out}: {e}") from None
+        build_config(config_cls, out, option)
+    except RetargetError as e:
+        raise SystemExit(str(e)) from None
     return out
 
 

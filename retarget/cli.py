@@ -24,6 +24,7 @@ from pathlib import Path
 from dexcanvas_core.errors import DexCanvasError
 from retarget import __version__
 from retarget.errors import RetargetError
+from retarget.overrides import parse_override
 
 # ---------------------------------------------------------------------------- retarget hands
 
@@ -176,7 +177,7 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--set",
         action="append",
-        type=_override,
+        type=parse_override,
         metavar="NAME=VALUE",
         help="change a RetargetConfig field (repeatable), e.g. --set w_contacts=100 --set "
         "contact_tangent_weight=0.05; recorded in metrics.json (retarget_overrides)",
@@ -193,12 +194,6 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
         default="auto",
         help="renderer of the --snapshot stills (default: Chromium if installed, else MuJoCo)",
     )
-
-
-def _override(text: str):
-    from retarget.overrides import parse_override
-
-    return parse_override(text)
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ import json
 import logging
 import os
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Literal
 
@@ -401,26 +401,13 @@ def retarget_config(cfg: RunConfig):
     """The run's ``RetargetConfig``: the defaults, ``cfg.overrides``, then the run's own
     options; an unknown field, one of the run's options or a value the config refuses is a
     ``RetargetError`` naming it."""
+    from retarget.overrides import build_config
     from retarget.retargeter import RetargetConfig
 
-    names = {f.name for f in fields(RetargetConfig)}
-    over = dict(cfg.overrides)
-    unknown = sorted(set(over) - names)
-    if unknown:
-        raise RetargetError(
-            f"--set: unknown RetargetConfig field(s) {', '.join(unknown)}; available: "
-            f"{', '.join(sorted(names - set(_RUN_OPTIONS)))}"
-        )
-    own = sorted(set(over) & set(_RUN_OPTIONS))
-    if own:
-        uses = "; ".join(f"{k} is the run's own option, use {_RUN_OPTIONS[k]}" for k in own)
-        raise RetargetError(f"--set: {uses}")
-    try:
-        return RetargetConfig(
-            **over, backend=cfg.backend, force_matching=cfg.forces, force_scale=cfg.force_scale
-        ).validate()
-    except (RetargetError, TypeError, ValueError) as e:
-        raise RetargetError(f"--set {over}: {e}") from None
+    return build_config(
+        RetargetConfig, cfg.overrides, "--set", _RUN_OPTIONS,
+        backend=cfg.backend, force_matching=cfg.forces, force_scale=cfg.force_scale,
+    )  # fmt: skip
 
 
 def run_retarget(cfg: RunConfig) -> dict:
