@@ -226,6 +226,21 @@ class PinocchioKinematics:
         """(6, nv) ``data.J`` after :meth:`forward`, row-major."""
         return self._J
 
+    def world_jacobian(self) -> np.ndarray:
+        """(6, nv) every joint's motion at the last :meth:`forward` as a world-frame twist
+        ``(v₀, ω)`` at the world origin (Pinocchio's ``data.J``, row-major; shared, do not
+        modify): a point ``p`` fixed to a body moves at ``v₀ + ω × p`` over the dofs of
+        :meth:`body_dof_masks`."""
+        return self._J
+
+    def body_dof_masks(self, bodies) -> np.ndarray:
+        """(k, nv) 1 where a dof moves the body (its support), else 0, per body name."""
+        try:
+            ids = [self.body_frames[b] for b in bodies]
+        except KeyError as e:
+            raise RetargetError(f"unknown body {e.args[0]!r}") from None
+        return np.ascontiguousarray(self._frame_mask[ids])
+
     def _point_jacobians(
         self, frame_ids: np.ndarray, p_world: np.ndarray, mask: np.ndarray | None = None
     ) -> np.ndarray:

@@ -257,6 +257,32 @@ def test_batched_site_and_point_jacobians_match_mujoco(rt):
                                    mj_kin.point_jacobians(bodies, pts), atol=1e-10)  # fmt: skip
 
 
+def test_compiled_rows_match_the_generic_rows(rt, demo_cube):
+    """The rows built straight from Pinocchio's world Jacobian (the compiled path) equal the
+    ones built from MuJoCo's point Jacobians (the path any other kinematics takes)."""
+    m = rt.scene.model
+    mj_kin = MujocoKinematics(m, nq=rt.nq)
+    rng = np.random.default_rng(7)
+    tg = rt.human_targets(demo_cube)
+    rows = {"object": 0, "self": 0}
+    for t in np.linspace(0, demo_cube.num_frames - 1, 6).astype(int):
+        rt.scene.set_object_pose(demo_cube.object.pos[t], demo_cube.object.rot_aa[t])
+        q = _random_pose(rt, rng, (0.2, 0.6))
+        q[:6] = wrist_qpos_from_mano(tg["wrist_R"][t], tg["wrist_p"][t])
+        rt.kin.forward(q)
+        mj_kin.forward(q)
+        for name, lim in (("object", rt.collision), ("self", rt.self_collision)):
+            G, h = lim.inequalities(RobotState(q=q, kin=rt.kin))
+            near = lim._near.copy()
+            G2, h2 = lim.inequalities(RobotState(q=q, kin=mj_kin))
+            np.testing.assert_allclose(G, G2, atol=1e-10)
+            np.testing.assert_array_equal(h, h2)
+            np.testing.assert_array_equal(near, lim._near)
+            assert G.shape == (lim.row_points(q).index.size, rt.nq)  # (no NaN normals here)
+            rows[name] += G.shape[0]
+    assert rows["object"] >= 5 and rows["self"] >= 5, rows
+
+
 # ------------------------------------------------------------------ one mj_collision sweep
 @pytest.mark.parametrize("name", ["shadow", "allegro", "svh", "panda"])
 def test_contact_sweep_matches_per_pair_distances(name, demo_cube):

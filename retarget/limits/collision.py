@@ -30,12 +30,14 @@ Two ways to find the pairs within ``distmax``, with the same result:
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
 from retarget.errors import RetargetError
+from retarget.kinematics import PinocchioKinematics
+from retarget.limits import _kernels
 from retarget.limits.base import Limit
 from retarget.state import RobotState
 
@@ -55,9 +57,6 @@ class PairDistances:
     normal: np.ndarray
     """(k, 3) unit normal from ``geom_a`` to ``geom_b`` (the distance grows along it); NaN where
     the nearest points coincide (touching exactly) and the query has no other direction."""
-
-
-_FIELDS = [f.name for f in fields(PairDistances)]
 
 
 def _normals(distance: np.ndarray, p_a: np.ndarray, p_b: np.ndarray) -> np.ndarray:
@@ -96,26 +95,40 @@ class ContactSweep:
         self.version = 0
         """Counts the sweeps run: the limits' per-configuration results are valid while it
         stays the same."""
-        self._none_i, self._none_f, self._none_3 = np.zeros(0, int), np.zeros(0), np.zeros((0, 3))
-        self._none_b = np.zeros(0, bool)
-        self._one_b = np.ones(1, bool)
-        self._one_b.flags.writeable = False
         self._warn = data.warning[mujoco.mjtWarning.mjWARN_CONTACTFULL]  # a live view
-        self._lut_stride = np.array([model.ngeom, 1])  # (geom1, geom2) → geom1·ngeom + geom2
         # Registered pairs (all limits on this sweep): (geom, geom) → registered pair index.
         self._lut = np.full(model.ngeom * model.ngeom, -1, dtype=int)
         self._ga = np.zeros(0, int)
         # Every contact of a registered pair this configuration, sorted by pair then distance:
         self.pair = np.zeros(0, int)
         """(k,) registered pair indices."""
-        self.dist = np.zeros(0)
-        """(k,) signed distances [m]."""
-        self.p_a, self.p_b, self.normal = np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
-        """(k, 3) nearest points on the pair's first and second geom, unit normal first → second."""
         self.closest = np.zeros(0, bool)
         """(k,) the pair's closest contact (mj_geomDistance's answer for the sweep types); the
         others are further contacts of the same pair (e.g. both ends of a capsule lying on a
         surface)."""
+        self.rows = np.zeros((0, _kernels.WIDTH))
+        """(k, 10) packed: signed distance [m], the nearest points on the pair's first and
+        second geom [m], the unit normal first → second (:mod:`retarget.limits._kernels`)."""
+
+    @property
+    def dist(self) -> np.ndarray:
+        """(k,) signed distances [m] (a view of :attr:`rows`)."""
+        return self.rows[:, _kernels.D]
+
+    @property
+    def p_a(self) -> np.ndarray:
+        """(k, 3) nearest points on the pair's first geom [m, world]."""
+        return self.rows[:, _kernels.PA : _kernels.PA + 3]
+
+    @property
+    def p_b(self) -> np.ndarray:
+        """(k, 3) nearest points on the pair's second geom [m, world]."""
+        return self.rows[:, _kernels.PB : _kernels.PB + 3]
+
+    @property
+    def normal(self) -> np.ndarray:
+        """(k, 3) unit normals first → second geom."""
+        return self.rows[:, _kernels.N : _kernels.N + 3]
 
     def register(self, pairs: Sequence[tuple[int, int]]) -> int:
         """Add pairs (hand geom first); returns the index of the first in the sweep's output."""
@@ -168,34 +181,9 @@ class ContactSweep:
         self._key = key
         self.version += 1
         c = d.contact
-        geom = c.geom
-        pair = self._lut[geom @ self._lut_stride]
-        sel = (pair >= 0).nonzero()[0]
-        if not sel.size:
-            self.pair, self.dist, self.closest = self._none_i, self._none_f, self._none_b
-            self.p_a = self.p_b = self.normal = self._none_3
-            return
-        dist = c.dist
-        ps = pair[sel]
-        if sel.size > 1:
-            order = np.lexsort((dist[sel], ps))
-            ps, k = ps[order], sel[order]
-            first = np.empty(sel.size, bool)
-            first[0] = True
-            np.not_equal(ps[1:], ps[:-1], out=first[1:])
-        else:
-            k, first = sel, self._one_b
-        dk = dist[k]
-        self.pair, self.dist, self.closest = ps, dk, first
-        # Surface points: the contact position ∓ d/2 along its normal (geom[0] → geom[1]);
-        # swapped where the contact lists the pair's geoms the other way round.
-        sign = (geom[k, 0] == self._ga[ps]) - 0.5  # ±0.5
-        n = c.frame[k, :3]
-        half = (sign * dk)[:, None] * n
-        pos = c.pos[k]
-        self.normal = (2.0 * sign)[:, None] * n
-        self.p_a = pos - half
-        self.p_b = pos + half
+        self.pair, self.closest, self.rows = _kernels.sweep_select(
+            c.geom, c.dist, c.pos, c.frame, self._lut, self.model.ngeom, self._ga
+        )
 
     def invalidate(self) -> None:
         """Forget the cached contacts (after changing the scene other than ``q``/mocap)."""
@@ -332,11 +320,12 @@ class CollisionLimit(Limit):
         self._fromto = np.zeros(6)
         self._direct_seen = np.zeros(0, int)
         self._direct_offset = 0
-        self._empty = PairDistances(
-            np.zeros(0, int), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
-        )
+        self._no_rows = (np.zeros(0, int), np.zeros((0, _kernels.WIDTH)))
+        for x in self._no_rows:
+            x.flags.writeable = False
         self.sweep = sweep
-        self._cached: tuple[int, PairDistances] | None = None  # (sweep version, query's answer)
+        self._cached: tuple[tuple[int, float], tuple] | None = None  # (sweep version, _answer)
+        self._masks = None  # (kinematics, dof masks of the pairs' bodies a and b): inequalities
         self._maps: tuple[np.ndarray, np.ndarray] | None = None  # see _sweep_maps
         if sweep is not None:
             if sweep.model is not model or sweep.data is not data:
@@ -379,44 +368,55 @@ class CollisionLimit(Limit):
 
     def query(self, q: np.ndarray) -> PairDistances:
         """Signed distances and nearest points of every pair within ``distmax`` at ``q``."""
-        if self.sweep is None:
-            return self._query_direct(q)
-        # The answer is kept with the sweep's version: the warm-start check, the first
-        # iterate's rows and the step's end check ask at the same configuration (box and mesh
-        # pairs' mj_geomDistance calls and the selection are then done once).
-        self.sweep.update(q)  # (leaves data at q)
-        key = (self.sweep.version, self.distmax)
+        index, rows, n_first = self._answer(q)
+        return _pair_distances(index[:n_first], rows[:n_first])
+
+    def _answer(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+        """The rows at ``q``: ``(index, rows, n_first)``, pair indices and packed rows
+        (:mod:`retarget.limits._kernels`) of, first, every pair within ``distmax`` at its
+        closest points (:meth:`query`: the swept pairs', then the per-pair ones'), ``n_first``
+        of them, then the further contacts ``mj_collision`` reports for the same pairs
+        (:meth:`row_points`). Read-only.
+
+        Kept with the sweep's version: the warm-start check, the first iterate's rows and the
+        step's end check ask at the same configuration (box and mesh pairs' mj_geomDistance
+        calls and the selection are then done once)."""
+        sw = self.sweep
+        if sw is None:
+            index, rows = self._query_direct(q)
+            return index, rows, index.size
+        sw.update(q)  # (leaves data at q)
+        key = (sw.version, self.distmax)
         if self._cached is not None and self._cached[0] == key:
             return self._cached[1]
-        swept = self._query_sweep()
-        if self._swept.size == len(self.pairs):
-            out = swept
-        else:
-            direct = self._query_direct(q, kinematics=False)
-            if not direct.index.size:
-                out = swept
-            elif not swept.index.size:
-                out = direct
-            else:
-                out = PairDistances(
-                    *(np.concatenate([getattr(swept, f), getattr(direct, f)]) for f in _FIELDS)
-                )
-        for f in _FIELDS:  # shared by every caller until the next sweep
-            getattr(out, f).flags.writeable = False
-        self._cached = (key, out)
-        return out
+        swept_map, every_map = self._sweep_maps()
+        index, rows, n_first = _kernels.limit_select(
+            sw.pair, sw.closest, sw.rows, swept_map, every_map, self.distmax
+        )
+        if self._swept.size != len(self.pairs):
+            d_index, d_rows = self._query_direct(q, kinematics=False)
+            if d_index.size:
+                index = np.concatenate([index[:n_first], d_index, index[n_first:]])
+                rows = np.concatenate([rows[:n_first], d_rows, rows[n_first:]])
+                n_first += d_index.size
+        index.flags.writeable = rows.flags.writeable = False  # shared until the next sweep
+        answer = (index, rows, n_first)
+        self._cached = (key, answer)
+        return answer
 
-    def _query_direct(self, q: np.ndarray, kinematics: bool = True) -> PairDistances:
-        """The per-pair path: sphere broad phase, then ``mj_geomDistance`` per candidate."""
+    def _query_direct(
+        self, q: np.ndarray, kinematics: bool = True
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The per-pair path: sphere broad phase, then ``mj_geomDistance`` per candidate;
+        ``(index, rows)`` of the pairs within ``distmax``, packed rows."""
         m, d = self.model, self.data
         if kinematics:
             d.qpos[: self.hand_nq] = q
             mujoco.mj_kinematics(m, d)
         idx = self.candidates()
         if not idx.size:
-            return self._empty
-        dist = np.empty(idx.size)
-        pts = np.empty((idx.size, 6))
+            return self._no_rows
+        rows = np.empty((idx.size, _kernels.WIDTH))
         fromto, distmax = self._fromto, self.distmax
         ga, gb = self._ga_list, self._gb_list
         keep = np.zeros(idx.size, bool)
@@ -424,12 +424,14 @@ class CollisionLimit(Limit):
             r = mujoco.mj_geomDistance(m, d, ga[i], gb[i], distmax, fromto)
             if r < distmax:
                 keep[k] = True
-                dist[k] = r
-                pts[k] = fromto
+                rows[k, _kernels.D] = r
+                rows[k, _kernels.PA : _kernels.PB + 3] = fromto
         if not keep.any():
-            return self._empty
-        p_a, p_b = pts[keep, :3], pts[keep, 3:]
-        return PairDistances(idx[keep], dist[keep], p_a, p_b, _normals(dist[keep], p_a, p_b))
+            return self._no_rows
+        rows = rows[keep]
+        p_a, p_b = rows[:, _kernels.PA : _kernels.PA + 3], rows[:, _kernels.PB : _kernels.PB + 3]
+        rows[:, _kernels.N :] = _normals(rows[:, _kernels.D], p_a, p_b)
+        return idx[keep], rows
 
     def _sweep_maps(self) -> tuple[np.ndarray, np.ndarray]:
         """Per pair registered on the sweep, this limit's pair index (-1: another limit's or
@@ -446,13 +448,6 @@ class CollisionLimit(Limit):
             self._maps = (swept, every)
         return self._maps
 
-    def _query_sweep(self) -> PairDistances:
-        """The swept pairs' closest contacts within ``distmax`` (after ``sweep.update``)."""
-        sw = self.sweep
-        i = self._sweep_maps()[0][sw.pair]
-        k = ((i >= 0) & sw.closest & (sw.dist < self.distmax)).nonzero()[0]
-        return PairDistances(i[k], sw.dist[k], sw.p_a[k], sw.p_b[k], sw.normal[k])
-
     def distances(self, q: np.ndarray) -> list[tuple[int, int, float, np.ndarray, np.ndarray]]:
         """``(geom_a, geom_b, d, p_a, p_b)`` for every pair within ``distmax`` at ``q``."""
         r = self.query(q)
@@ -463,43 +458,21 @@ class CollisionLimit(Limit):
 
     def min_distance(self, q: np.ndarray) -> float:
         """Smallest signed distance [m] over the pairs within ``distmax`` at ``q`` (else inf)."""
-        r = self.query(q)
-        return float(r.distance.min()) if r.distance.size else np.inf
-
-    def _further_contacts(self) -> PairDistances:
-        """The sweep's contacts within ``distmax`` other than each pair's closest (after an
-        update at the current ``q``); for the per-pair pairs, all of theirs."""
-        sw = self.sweep
-        swept, every = self._sweep_maps()
-        index = every[sw.pair]  # the limit's pair of each sweep contact (-1: none)
-        closest_swept = sw.closest & (swept[sw.pair] >= 0)  # already a query() row
-        k = ((index >= 0) & ~closest_swept & (sw.dist < self.distmax)).nonzero()[0]
-        if not k.size:
-            return self._empty
-        return PairDistances(index[k], sw.dist[k], sw.p_a[k], sw.p_b[k], sw.normal[k])
+        _, rows, n_first = self._answer(q)
+        return float(rows[:n_first, _kernels.D].min()) if n_first else np.inf
 
     def row_points(self, q: np.ndarray) -> PairDistances:
         """The witness points of :meth:`inequalities`' rows at ``q``, in row order: each pair
         within ``distmax`` at its closest points (:meth:`query`), then the further contacts
-        ``mj_collision`` reports for the same pairs.
+        ``mj_collision`` reports for the same pairs (the per-pair pairs: all of theirs).
 
         A row at the closest points alone lets a step turn another part of the geom into the
         surface: a capsule or box lying along a cylinder pivots about the constrained end and
         the other end goes in (built-in demonstrations, Allegro and LEAP: up to 7.0 mm deep
         with closest-point rows).
         """
-        return self._with_further(self.query(q))
-
-    def _with_further(self, r: PairDistances) -> PairDistances:
-        """:meth:`query`'s answer ``r`` at the sweep's configuration followed by the further
-        contacts (:meth:`row_points`)."""
-        if self.sweep is not None:
-            extra = self._further_contacts()
-            if extra.index.size:
-                r = PairDistances(
-                    *(np.concatenate([getattr(r, f), getattr(extra, f)]) for f in _FIELDS)
-                )
-        return r
+        index, rows, _ = self._answer(q)
+        return _pair_distances(index, rows)
 
     NEAR = 0.005
     """Pairs within this [m] of their allowed distance (``−pair_margin`` where that is a
@@ -539,35 +512,38 @@ class CollisionLimit(Limit):
         )
 
     def inequalities(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
-        closest = self.query(state.q)
-        r = self._with_further(closest)  # (row_points)
-        # Each pair's closest points are query()'s row, so its near pairs are unique there.
-        clear = np.minimum(self.pair_margins[closest.index], 0.0)  # −clearance, else 0
-        self._near = closest.index[closest.distance + clear < self.NEAR]
-        if not r.distance.size:
+        index, rows, n_first = self._answer(state.q)
+        setup = (
+            index, rows, n_first, self.data.geom_xpos, self._ga, self.pair_margins,
+            np.nan if self.max_recovery is None else self.max_recovery, self.hold_only,
+            self.NEAR,
+        )  # fmt: skip
+        kin = state.kin
+        if isinstance(kin, PinocchioKinematics):
+            # The rows straight from the world-frame joint Jacobian, in the same pass.
+            if self._masks is None or self._masks[0] is not kin:
+                a = kin.body_dof_masks(self._bodies_a)
+                b = kin.body_dof_masks(self._bodies_b) if self.self_collision else a
+                self._masks = (kin, a, b)
+            _, masks_a, masks_b = self._masks
+            G, h, self._near = _kernels.rows_and_jacobians(
+                *setup, kin.world_jacobian(), masks_a, masks_b, self.self_collision
+            )
+            return G, h
+        index, out, self._near = _kernels.row_setup(*setup)
+        K = _kernels
+        if not index.size:
             return np.zeros((0, state.nv)), np.zeros(0)
-        n = r.normal
-        ok = np.isfinite(n[:, 0])
-        if not ok.all():
-            # Touching exactly: the nearest points coincide. Use the direction from the hand
-            # geom's centre to the contact point instead (exact for spheres and capsules).
-            c = r.p_b[~ok] - self.data.geom_xpos[self._ga[r.index[~ok]]]
-            cn = np.linalg.norm(c, axis=1)
-            n = n.copy()
-            n[~ok] = c / np.maximum(cn, 1e-12)[:, None]
-            ok = ok.copy()
-            ok[~ok] = cn >= 1e-12
-        k = r.index.size
-        if self.self_collision:  # both points in one call: J = J_a − J_b
-            bodies = (*self._bodies_a[r.index], *self._bodies_b[r.index])
-            J = state.kin.point_jacobians(bodies, np.concatenate([r.p_a, r.p_b]))
-            J = J[:k] - J[k:]
-        else:
-            J = state.kin.point_jacobians(tuple(self._bodies_a[r.index]), r.p_a)  # (k, 3, nv)
-        G = np.einsum("ki,kij->kj", n, J)
-        h = r.distance + self.pair_margins[r.index]
-        if self.max_recovery is not None:
-            h = np.maximum(h, -self.max_recovery)
-        if self.hold_only:
-            h = np.maximum(h, 0.0)
-        return G[ok], h[ok]
+        n = out[:, K.N :]
+        J = kin.point_jacobians(tuple(self._bodies_a[index]), out[:, K.PA : K.PA + 3])
+        if self.self_collision:  # J = J_a − J_b
+            J = J - kin.point_jacobians(tuple(self._bodies_b[index]), out[:, K.PB : K.PB + 3])
+        return np.einsum("ki,kij->kj", n, J).reshape(-1, state.nv), out[:, K.D].copy()
+
+
+def _pair_distances(index: np.ndarray, rows: np.ndarray) -> PairDistances:
+    """Packed rows (:mod:`retarget.limits._kernels`) as :class:`PairDistances` (views)."""
+    K = _kernels
+    return PairDistances(
+        index, rows[:, K.D], rows[:, K.PA : K.PA + 3], rows[:, K.PB : K.PB + 3], rows[:, K.N :]
+    )
