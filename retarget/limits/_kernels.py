@@ -195,3 +195,47 @@ def rows_and_jacobians(
     if self_collision:
         _add_normal_jacobians(J, masks_b, keep, out, PB, -1.0, G)
     return G, out[:, D].copy(), near_pairs
+
+
+@njit(cache=True)
+def broad_phase(xpos, xmat, sph, sph_a, sph_b, reach2, pln, pln_a, pln_b, pln_reach):
+    """The per-pair path's candidates (``CollisionLimit.candidates``): the pairs ``sph``
+    whose geoms' centres ``xpos`` are closer than ``√reach2``, then the plane pairs ``pln``
+    whose hand geom's centre is less than ``pln_reach`` above the plane (its frame's z axis
+    from ``xmat``)."""
+    out = np.empty(sph.shape[0] + pln.shape[0], np.int64)
+    m = 0
+    for i in range(sph.shape[0]):
+        a, b = sph_a[i], sph_b[i]
+        dx = xpos[a, 0] - xpos[b, 0]
+        dy = xpos[a, 1] - xpos[b, 1]
+        dz = xpos[a, 2] - xpos[b, 2]
+        if dx * dx + dy * dy + dz * dz < reach2[i]:
+            out[m] = sph[i]
+            m += 1
+    for i in range(pln.shape[0]):
+        a, b = pln_a[i], pln_b[i]
+        h = (xpos[a, 0] - xpos[b, 0]) * xmat[b, 2]
+        h += (xpos[a, 1] - xpos[b, 1]) * xmat[b, 5]
+        h += (xpos[a, 2] - xpos[b, 2]) * xmat[b, 8]
+        if h < pln_reach[i]:
+            out[m] = pln[i]
+            m += 1
+    return out[:m].copy()
+
+
+@njit(cache=True)
+def set_normals(rows):
+    """Fill the ``N`` columns of packed rows from their points: ``(p_b − p_a) / ±|p_b − p_a|``
+    (− where penetrating: the normal points the way the distance grows; NaN where the points
+    coincide)."""
+    for r in range(rows.shape[0]):
+        v0 = rows[r, PB] - rows[r, PA]
+        v1 = rows[r, PB + 1] - rows[r, PA + 1]
+        v2 = rows[r, PB + 2] - rows[r, PA + 2]
+        norm = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+        if norm > 1e-9:
+            s = norm if rows[r, D] >= 0 else -norm
+            rows[r, N], rows[r, N + 1], rows[r, N + 2] = v0 / s, v1 / s, v2 / s
+        else:
+            rows[r, N] = rows[r, N + 1] = rows[r, N + 2] = np.nan

@@ -59,16 +59,6 @@ class PairDistances:
     the nearest points coincide (touching exactly) and the query has no other direction."""
 
 
-def _normals(distance: np.ndarray, p_a: np.ndarray, p_b: np.ndarray) -> np.ndarray:
-    """Unit normals ``a → b`` from nearest points: ``(p_b − p_a) / d`` normalised (NaN if d = 0)."""
-    v = p_b - p_a
-    norm = np.sqrt(np.add.reduce(v * v, axis=1))
-    signed = np.where(distance >= 0, norm, -norm)[:, None]  # (± is exact: v / ±|v|)
-    out = np.full_like(v, np.nan)
-    np.divide(v, signed, out=out, where=(norm > 1e-9)[:, None])  # (no errstate: costs more)
-    return out
-
-
 # Pairs with one of these geoms get identical answers from mj_collision and mj_geomDistance.
 _SWEEP_TYPES = {
     int(mujoco.mjtGeom.mjGEOM_PLANE),
@@ -356,15 +346,11 @@ class CollisionLimit(Limit):
 
         Uses the geom poses already in ``data`` (call after ``mj_kinematics``).
         """
-        xpos = self.data.geom_xpos
-        diff = xpos[self._sph_a] - xpos[self._sph_b]  # (P, 3)
-        out = self._sph[np.add.reduce(diff * diff, axis=1) < self._sph_reach2]  # (= .sum(axis=1))
-        if self._pln.size:
-            # Height of the hand geom's centre above the plane (normal: the plane frame's z).
-            n = self.data.geom_xmat[self._pln_b][:, [2, 5, 8]]
-            h = np.einsum("ij,ij->i", xpos[self._pln_a] - xpos[self._pln_b], n)
-            out = np.concatenate([out, self._pln[h < self._pln_reach]])
-        return out
+        d = self.data
+        return _kernels.broad_phase(
+            d.geom_xpos, d.geom_xmat, self._sph, self._sph_a, self._sph_b, self._sph_reach2,
+            self._pln, self._pln_a, self._pln_b, self._pln_reach,
+        )  # fmt: skip
 
     def query(self, q: np.ndarray) -> PairDistances:
         """Signed distances and nearest points of every pair within ``distmax`` at ``q``."""
@@ -419,19 +405,19 @@ class CollisionLimit(Limit):
         rows = np.empty((idx.size, _kernels.WIDTH))
         fromto, distmax = self._fromto, self.distmax
         ga, gb = self._ga_list, self._gb_list
-        keep = np.zeros(idx.size, bool)
-        for k, i in enumerate(idx.tolist()):
+        keep = []
+        for i in idx.tolist():
             r = mujoco.mj_geomDistance(m, d, ga[i], gb[i], distmax, fromto)
             if r < distmax:
-                keep[k] = True
-                rows[k, _kernels.D] = r
-                rows[k, _kernels.PA : _kernels.PB + 3] = fromto
-        if not keep.any():
+                row = rows[len(keep)]
+                row[_kernels.D] = r
+                row[_kernels.PA : _kernels.PB + 3] = fromto
+                keep.append(i)
+        if not keep:
             return self._no_rows
-        rows = rows[keep]
-        p_a, p_b = rows[:, _kernels.PA : _kernels.PA + 3], rows[:, _kernels.PB : _kernels.PB + 3]
-        rows[:, _kernels.N :] = _normals(rows[:, _kernels.D], p_a, p_b)
-        return idx[keep], rows
+        rows = rows[: len(keep)]
+        _kernels.set_normals(rows)
+        return np.array(keep), rows
 
     def _sweep_maps(self) -> tuple[np.ndarray, np.ndarray]:
         """Per pair registered on the sweep, this limit's pair index (-1: another limit's or
