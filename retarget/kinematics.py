@@ -223,6 +223,15 @@ class PinocchioKinematics:
             self._ids[sites] = rows
         return rows
 
+    def site_rows(self, sites: tuple[str, ...]) -> np.ndarray:
+        """(k,) rows of ``sites`` in :meth:`site_arrays` (memoised per name tuple)."""
+        return self._site_rows(sites)
+
+    def site_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every site's Jacobian (nsite, 6, nv) and world position (nsite, 3) [m] at the last
+        :meth:`forward`, in MuJoCo site order (shared, read-only: copy to modify)."""
+        return self._all_site_jacobians(), self._all_site_positions()
+
     def _all_site_positions(self) -> np.ndarray:
         """(nsite, 3) [m] every site's world position at the last :meth:`forward` (a view)."""
         return self._mj_data.site_xpos

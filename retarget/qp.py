@@ -1,11 +1,11 @@
 """Building and solving the per-iterate QP on the joint step ``Δq``.
 
-``build_qp`` sums the objectives' ``(H, c)`` terms (plus Levenberg–Marquardt damping), stacks
-the limits' rows and intersects their box bounds (joint ranges, velocity: ``lb ≤ Δq ≤ ub``, which
-the solver treats as simple bounds instead of ``2 nv`` general rows); ``solve_qp`` calls DAQP
-directly (the default) or any other solver through ``qpsolvers``. Keeping the two apart lets tests
-inspect the problem, and a failed solve raises with the problem attached instead of silently
-returning the previous pose.
+``build_qp`` sums the objectives' ``(H, c)`` terms (``Objective.accumulate``; plus
+Levenberg–Marquardt damping), stacks the limits' rows and intersects their box bounds (joint
+ranges, velocity: ``lb ≤ Δq ≤ ub``, which the solver treats as simple bounds instead of ``2 nv``
+general rows); ``solve_qp`` calls DAQP directly (the default) or any other solver through
+``qpsolvers``. Keeping the two apart lets tests inspect the problem, and a failed solve raises
+with the problem attached instead of silently returning the previous pose.
 """
 
 from __future__ import annotations
@@ -71,9 +71,7 @@ def build_qp(
     P = _damping_matrix(nv, damping)
     c = np.zeros(nv)
     for obj in objectives:
-        H, g = obj.qp_terms(state)
-        P += H
-        c += g
+        obj.accumulate(state, P, c)  # (P += JᵀWJ, c += JᵀWe)
     Gs, hs, As, bs = [np.zeros((0, nv))], [np.zeros(0)], [np.zeros((0, nv))], [np.zeros(0)]
     lb = ub = None
     for lim in limits:

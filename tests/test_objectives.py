@@ -99,6 +99,34 @@ def test_qp_terms_are_gauss_newton_of_the_cost(kin):
     assert np.all(np.linalg.eigvalsh(H) > -1e-12)
 
 
+def test_accumulate_adds_the_qp_terms(kin):
+    """``build_qp``'s in-place accumulation (compiled; straight from the all-sites arrays for
+    keypoints and vectors) adds exactly what ``qp_terms`` returns, whatever the weights (per
+    site, zero rows)."""
+    from retarget.objectives.base import Objective
+
+    rng = np.random.default_rng(4)
+    objs = _objectives(kin, rng)
+    for step in range(3):
+        if step == 1:
+            objs[0].weight = np.array([0.0, 2.5])  # one keypoint switched off
+            objs[1].weight = 3.0
+        if step == 2:
+            objs[4].weight = rng.uniform(0.0, 1.0, size=kin.nq)
+        s = _state(kin, rng.uniform(-0.8, 0.8, size=kin.nq))
+        for obj in objs:
+            P0, c0 = rng.normal(size=(kin.nq, kin.nq)), rng.normal(size=kin.nq)
+            P, c = P0.copy(), c0.copy()
+            obj.accumulate(s, P, c)
+            H, g = obj.qp_terms(s)
+            np.testing.assert_allclose(P - P0, H, atol=1e-12, err_msg=f"{obj.name} {step}")
+            np.testing.assert_allclose(c - c0, g, atol=1e-12, err_msg=f"{obj.name} {step}")
+            H2, g2 = Objective.qp_terms(obj, s)  # the generic JᵀWJ, JᵀWe
+            np.testing.assert_allclose(H, H2, atol=1e-12, err_msg=f"{obj.name} {step}")
+            np.testing.assert_allclose(g, g2, atol=1e-12, err_msg=f"{obj.name} {step}")
+            assert np.abs(H).max() > 0, obj.name
+
+
 def test_memoised_qp_terms_follow_weight_and_mask_changes(kin):
     """Posture and smoothness memoise their diagonal Hessian; it must track new weights and
     masks, and match the generic ``JᵀWJ, JᵀWe`` of their error and Jacobian."""

@@ -88,6 +88,12 @@ def test_backends_agree_on_kinematic_terms(demo):
         Hm, cm = obj.qp_terms(RobotState(q=q, kin=mj_kin))
         np.testing.assert_allclose(Hp, Hm, atol=1e-8)
         np.testing.assert_allclose(cp, cm, atol=1e-8)
+        # build_qp's accumulation: compiled from Pinocchio's all-sites arrays, generic on MuJoCo.
+        for kin in (pin_kin, mj_kin):
+            P, c = np.zeros_like(Hp), np.zeros_like(cp)
+            obj.accumulate(RobotState(q=q, kin=kin), P, c)
+            np.testing.assert_allclose(P, Hm, atol=1e-8)
+            np.testing.assert_allclose(c, cm, atol=1e-8)
 
 
 def test_mink_backend_runs_and_matches(demo):
@@ -192,9 +198,17 @@ def test_surface_contact_qp_terms_equal_error_and_jacobian(demo):
     assert np.abs(c0).max() > 1e-6  # the fingers are off their targets
     np.testing.assert_allclose(H, H0, rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(c, c0, rtol=1e-12, atol=1e-14)
+    P, g = np.zeros_like(H), np.zeros_like(c)
+    rt.contacts.accumulate(s, P, g)  # what build_qp calls
+    np.testing.assert_allclose(P, H0, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(g, c0, rtol=1e-12, atol=1e-14)
     rt.contacts.set_contacts(np.zeros(F, bool), tg["contact_points"][t])
     H, c = rt.contacts.qp_terms(s)
     assert not H.any() and not c.any()
+    before = P.copy(), g.copy()
+    rt.contacts.accumulate(s, P, g)
+    np.testing.assert_array_equal(P, before[0])  # nothing added
+    np.testing.assert_array_equal(g, before[1])
 
 
 def test_surface_contact_tangent_weight_scales_only_the_tangential_pull(demo):

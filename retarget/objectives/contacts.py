@@ -7,6 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from retarget.errors import RetargetError
+from retarget.objectives._kernels import weighted_gram
 from retarget.objectives.base import Objective
 from retarget.state import RobotState
 
@@ -267,6 +268,15 @@ class SurfaceContactObjective(Objective):
         )
         return self._in_surface_frames(idx, J).reshape(-1, state.nv)
 
+    def _error_and_jacobian(self, state: RobotState, idx: np.ndarray):
+        """:meth:`error` and :meth:`jacobian` of the active fingers ``idx`` in one pass."""
+        nv = state.nv
+        pts = self.finger_points(state.q)
+        P = self.finger_point_array(state.q)[idx]
+        e = self._in_surface_frames(idx, P - self.points[idx]).reshape(-1)
+        J = state.kin.point_jacobians(tuple(pts[i][0] for i in idx.tolist()), P)
+        return e, np.ascontiguousarray(self._in_surface_frames(idx, J).reshape(-1, nv))
+
     def qp_terms(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`error` and :meth:`jacobian` in one pass over the active fingers (the same
         ``(H, c)`` as the base class's; a test pins the two)."""
@@ -274,10 +284,12 @@ class SurfaceContactObjective(Objective):
         idx = np.flatnonzero(self.active)
         if not idx.size:
             return np.zeros((nv, nv)), np.zeros(nv)
-        pts = self.finger_points(state.q)
-        P = self.finger_point_array(state.q)[idx]
-        e = self._in_surface_frames(idx, P - self.points[idx]).reshape(-1)
-        J = state.kin.point_jacobians(tuple(pts[i][0] for i in idx.tolist()), P)
-        J = self._in_surface_frames(idx, J).reshape(-1, nv)
+        e, J = self._error_and_jacobian(state, idx)
         JW = J.T * self.weights(e.size)
         return JW @ J, JW @ e
+
+    def accumulate(self, state: RobotState, P: np.ndarray, c: np.ndarray) -> None:
+        idx = np.flatnonzero(self.active)
+        if idx.size:
+            e, J = self._error_and_jacobian(state, idx)
+            weighted_gram(J, self.weights(e.size), e, P, c)

@@ -7,8 +7,12 @@ from collections.abc import Sequence
 import numpy as np
 
 from retarget.errors import RetargetError
+from retarget.kinematics import PinocchioKinematics
+from retarget.objectives._kernels import site_gram
 from retarget.objectives.base import Objective
 from retarget.state import RobotState
+
+_NO_ROWS = np.zeros(0, dtype=np.int64)  # site_gram's rows_b for absolute targets
 
 
 class KeypointObjective(Objective):
@@ -47,6 +51,15 @@ class KeypointObjective(Objective):
         if not self.sites:
             return np.zeros((0, state.nv))
         return state.kin.site_jacobians(self._sites)[:, :3].reshape(-1, state.nv)
+
+    def accumulate(self, state: RobotState, P: np.ndarray, c: np.ndarray) -> None:
+        kin = state.kin
+        if not self.sites or not isinstance(kin, PinocchioKinematics):
+            return super().accumulate(state, P, c)
+        J, p = kin.site_arrays()
+        rows = kin.site_rows(self._sites)
+        w = self._weight_vector(3 * len(self.sites))
+        site_gram(J, p, rows, _NO_ROWS, self.targets, w, P, c)
 
 
 class VectorObjective(Objective):
@@ -92,3 +105,11 @@ class VectorObjective(Objective):
         k = state.kin
         J = k.site_jacobians(self._a)[:, :3] - k.site_jacobians(self._b)[:, :3]
         return J.reshape(-1, state.nv)
+
+    def accumulate(self, state: RobotState, P: np.ndarray, c: np.ndarray) -> None:
+        kin = state.kin
+        if not self.pairs or not isinstance(kin, PinocchioKinematics):
+            return super().accumulate(state, P, c)
+        J, p = kin.site_arrays()
+        w = self._weight_vector(3 * len(self.pairs))
+        site_gram(J, p, kin.site_rows(self._a), kin.site_rows(self._b), self.targets, w, P, c)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from retarget.objectives._kernels import add_diagonal
 from retarget.objectives.base import Objective
 from retarget.state import RobotState
 
@@ -28,6 +29,10 @@ class PostureObjective(Objective):
         # J = S (a row selection): JᵀWJ is diagonal and JᵀWe scatters W e; no matrix products.
         H, w = _diagonal(self, self._weight_vector(np.count_nonzero(self.mask)), self.mask)
         return H, w * (state.q - self.q_ref)
+
+    def accumulate(self, state: RobotState, P: np.ndarray, c: np.ndarray) -> None:
+        _, w = _diagonal(self, self._weight_vector(np.count_nonzero(self.mask)), self.mask)
+        add_diagonal(P, c, w, state.q - self.q_ref)
 
 
 class SmoothnessObjective(Objective):
@@ -57,6 +62,11 @@ class SmoothnessObjective(Objective):
             return np.zeros((state.nv, state.nv)), np.zeros(state.nv)
         H, w = _diagonal(self, self._weight_vector(state.nv), None)  # J = I
         return H, w * (state.q - self.q_prev)
+
+    def accumulate(self, state: RobotState, P: np.ndarray, c: np.ndarray) -> None:
+        if self.q_prev is not None:
+            _, w = _diagonal(self, self._weight_vector(state.nv), None)
+            add_diagonal(P, c, w, state.q - self.q_prev)
 
 
 def _diagonal(obj: Objective, weights: np.ndarray, mask: np.ndarray | None):
