@@ -17,12 +17,12 @@ from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
-from numba import njit
 
+from retarget._jit import F2, F3W, kernel
 from retarget.errors import RetargetError
 
 
-@njit(cache=True)
+@kernel(F2, F2, F2, F3W)
 def _frame_jacobians(J, masks, points, out):
     """Fill ``out`` (k, 3 or 6, nv) with the Jacobians of points ``points`` (k, 3) [m, world]
     fixed to bodies whose dofs are ``masks`` (k, nv), linear rows then (for 6) angular, from

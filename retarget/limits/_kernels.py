@@ -13,9 +13,7 @@ and ``PB`` the nearest points on the pair's first (hand) and second geom [m, wor
 unit normal first → second (NaN where the points coincide), with a separate ``(k,)`` array of
 pair indices.
 
-``cache=True`` keeps the compiled code beside this file (``__pycache__``), so only the first
-run on a machine pays the compilation (a few seconds); ``NUMBA_DISABLE_JIT=1`` runs them as
-plain Python.
+Compiled at import, cached on disk: :mod:`retarget._jit`.
 """
 
 from __future__ import annotations
@@ -23,12 +21,14 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from retarget._jit import B1, BOOL, F1, F2, F2W, FLOAT, I1, I2_32, INT, kernel
+
 D, PA, PB, N = 0, 1, 4, 7
 """Columns of a packed row: distance, point on geom a (3), point on geom b (3), normal (3)."""
 WIDTH = 10
 
 
-@njit(cache=True)
+@kernel(I2_32, F1, F2, F2, I1, INT, I1)
 def sweep_select(geom, dist, pos, frame, lut, ngeom, ga):
     """The contacts of registered pairs, sorted by (pair, distance), stable.
 
@@ -79,7 +79,7 @@ def sweep_select(geom, dist, pos, frame, lut, ngeom, ga):
     return ps[:k].copy(), closest, rows
 
 
-@njit(cache=True)
+@kernel(I1, B1, F2, I1, I1, FLOAT)
 def limit_select(pair, closest, rows, swept_map, every_map, distmax):
     """One limit's rows from a sweep (:func:`sweep_select`'s output), in sweep order:
     ``(index, rows, n_first)``, first the closest contacts of its swept pairs within
@@ -112,7 +112,7 @@ def limit_select(pair, closest, rows, swept_map, every_map, distmax):
     return index[:m].copy(), out, n_first
 
 
-@njit(cache=True)
+@kernel(I1, F2, INT, F2, I1, F1, FLOAT, BOOL, FLOAT)
 def row_setup(index, rows, n_first, geom_xpos, ga, pair_margins, max_recovery, hold_only, near):
     """The non-penetration rows' directions and right-hand sides: ``(index, out, near_pairs)``
     with ``out`` packed rows whose ``D`` column holds ``h`` instead of the distance.
@@ -179,7 +179,7 @@ def _add_normal_jacobians(J, masks, index, out_rows, col, sign, G):
                 G[r, j] += sign * v
 
 
-@njit(cache=True)
+@kernel(I1, F2, INT, F2, I1, F1, FLOAT, BOOL, FLOAT, F2, F2, F2, BOOL)
 def rows_and_jacobians(
     index, rows, n_first, geom_xpos, ga, pair_margins, max_recovery, hold_only, near,
     J, masks_a, masks_b, self_collision,
@@ -197,7 +197,7 @@ def rows_and_jacobians(
     return G, out[:, D].copy(), near_pairs
 
 
-@njit(cache=True)
+@kernel(F2, F2, I1, I1, I1, F1, I1, I1, I1, F1)
 def broad_phase(xpos, xmat, sph, sph_a, sph_b, reach2, pln, pln_a, pln_b, pln_reach):
     """The per-pair path's candidates (``CollisionLimit.candidates``): the pairs ``sph``
     whose geoms' centres ``xpos`` are closer than ``√reach2``, then the plane pairs ``pln``
@@ -224,7 +224,7 @@ def broad_phase(xpos, xmat, sph, sph_a, sph_b, reach2, pln, pln_a, pln_b, pln_re
     return out[:m].copy()
 
 
-@njit(cache=True)
+@kernel(F2W)
 def set_normals(rows):
     """Fill the ``N`` columns of packed rows from their points: ``(p_b − p_a) / ±|p_b − p_a|``
     (− where penetrating: the normal points the way the distance grows; NaN where the points

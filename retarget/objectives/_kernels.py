@@ -4,16 +4,16 @@ Each objective adds ``JᵀWJ`` to the QP's ``P`` and ``JᵀWe`` to its ``c``. As
 operations per objective plus its error and Jacobian's slicing (some ten per objective, each
 one to two microseconds of overhead on a 30-dof hand); here it is one pass that reads the rows
 where they are (the kinematics' all-sites arrays for site targets) and skips the zero entries
-of the Jacobians (a finger's rows touch its own joints and the wrist's). See
-:mod:`retarget.limits._kernels` for the caching of the compiled code.
+of the Jacobians (a finger's rows touch its own joints and the wrist's). Compiled at
+import, cached on disk: :mod:`retarget._jit`.
 """
 
 from __future__ import annotations
 
-from numba import njit
+from retarget._jit import F1, F1W, F2, F2W, F3, I1, kernel
 
 
-@njit(cache=True)
+@kernel(F2, F1, F1, F2W, F1W)
 def weighted_gram(J, w, e, P, c):
     """``P += Jᵀ diag(w) J``, ``c += Jᵀ diag(w) e`` for ``J`` (m, nv)."""
     m, nv = J.shape
@@ -32,7 +32,7 @@ def weighted_gram(J, w, e, P, c):
                 P[a, b] += xa * J[i, b]
 
 
-@njit(cache=True)
+@kernel(F3, F2, I1, I1, F2, F1, F2W, F1W)
 def site_gram(J_sites, p_sites, rows_a, rows_b, targets, w, P, c):
     """The keypoint (``rows_b`` empty: ``e = p_a − target``) or vector
     (``e = p_a − p_b − target``) terms of sites ``rows_a`` (and ``rows_b``), rows into the
@@ -67,7 +67,7 @@ def site_gram(J_sites, p_sites, rows_a, rows_b, targets, w, P, c):
                         P[a, b] += xa * J_sites[sa, r, b]
 
 
-@njit(cache=True)
+@kernel(F2W, F1W, F1, F1)
 def add_diagonal(P, c, w, r):
     """``P += diag(w)``, ``c += w ⊙ r`` (a row-selection Jacobian's terms)."""
     for a in range(w.shape[0]):
