@@ -59,6 +59,17 @@ class PairDistances:
     the nearest points coincide (touching exactly) and the query has no other direction."""
 
 
+def _pose(
+    m: mujoco.MjModel, d: mujoco.MjData, scene: mujoco.MjData, q: np.ndarray, hand_nq: int
+) -> mujoco.MjData:
+    """``d`` at the scene's configuration with the hand at ``q`` (kinematics only)."""
+    d.qpos[:] = scene.qpos
+    d.qpos[:hand_nq] = q
+    d.mocap_pos[:], d.mocap_quat[:] = scene.mocap_pos, scene.mocap_quat
+    mujoco.mj_kinematics(m, d)
+    return d
+
+
 # Pairs with one of these geoms get identical answers from mj_collision and mj_geomDistance.
 _SWEEP_TYPES = {
     int(mujoco.mjtGeom.mjGEOM_PLANE),
@@ -86,6 +97,8 @@ class ContactSweep:
         """Counts the sweeps run: the limits' per-configuration results are valid while it
         stays the same."""
         self._warn = data.warning[mujoco.mjtWarning.mjWARN_CONTACTFULL]  # a live view
+        self._posed: mujoco.MjData | None = None  # see posed()
+        self._posed_key = b""
         # Registered pairs (all limits on this sweep): (geom, geom) → registered pair index.
         self._lut = np.full(model.ngeom * model.ngeom, -1, dtype=int)
         self._ga = np.zeros(0, int)
@@ -175,9 +188,25 @@ class ContactSweep:
             c.geom, c.dist, c.pos, c.frame, self._lut, self.model.ngeom, self._ga
         )
 
+    def posed(self, q: np.ndarray) -> mujoco.MjData:
+        """A second ``MjData`` at hand configuration ``q`` and the scene's mocap poses
+        (kinematics only; cached), for the limits' end-of-step checks: the sweep's own data
+        stays at its cached configuration, which the next iterate reuses while the object
+        rests."""
+        q = np.asarray(q, dtype=np.float64)
+        d = self.data
+        key = q.tobytes() + d.mocap_pos.tobytes() + d.mocap_quat.tobytes()
+        if self._posed is None:
+            self._posed = mujoco.MjData(self.model)
+        elif key == self._posed_key:
+            return self._posed
+        self._posed_key = key
+        return _pose(self.model, self._posed, d, q, self.hand_nq)
+
     def invalidate(self) -> None:
-        """Forget the cached contacts (after changing the scene other than ``q``/mocap)."""
-        self._key = b""
+        """Forget the cached contacts and pose (after changing the scene other than
+        ``q``/mocap)."""
+        self._key = self._posed_key = b""
         self.version += 1
 
     def query_distance(self, ga: int, gb: int) -> float:
@@ -481,15 +510,13 @@ class CollisionLimit(Limit):
         """
         if not self._near.size:
             return np.inf
-        m, d = self.model, self._check_data
-        if d is None:
-            # Its own MjData: the shared one stays at the sweep's cached configuration (reused
-            # by the next iterate while the object rests).
-            d = self._check_data = mujoco.MjData(m)
-        d.qpos[:] = self.data.qpos
-        d.qpos[: self.hand_nq] = q
-        d.mocap_pos[:], d.mocap_quat[:] = self.data.mocap_pos, self.data.mocap_quat
-        mujoco.mj_kinematics(m, d)
+        m = self.model
+        if self.sweep is not None:
+            d = self.sweep.posed(q)  # (shared by the limits on the sweep)
+        else:
+            if self._check_data is None:
+                self._check_data = mujoco.MjData(m)
+            d = _pose(m, self._check_data, self.data, q, self.hand_nq)
         ga, gb, pm = self._ga_list, self._gb_list, self.pair_margins
         reach = self.NEAR + max(0.0, -float(pm[self._near].min()))
         return min(
