@@ -18,11 +18,11 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-from retarget._jit import F2, F3W, kernel
+from retarget._jit import F2, F2C, F3CW, kernel
 from retarget.errors import RetargetError
 
 
-@kernel(F2, F2, F2, F3W)
+@kernel(F2C, F2C, F2, F3CW)
 def _frame_jacobians(J, masks, points, out):
     """Fill ``out`` (k, 3 or 6, nv) with the Jacobians of points ``points`` (k, 3) [m, world]
     fixed to bodies whose dofs are ``masks`` (k, nv), linear rows then (for 6) angular, from

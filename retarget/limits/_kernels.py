@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from retarget._jit import B1, BOOL, F1, F2, F2W, FLOAT, I1, I2_32, INT, kernel
+from retarget._jit import B1, BOOL, F1, F2, F2C, F2W, FLOAT, I1, I2_32, INT, kernel
 
 D, PA, PB, N = 0, 1, 4, 7
 """Columns of a packed row: distance, point on geom a (3), point on geom b (3), normal (3)."""
@@ -179,7 +179,7 @@ def _add_normal_jacobians(J, masks, index, out_rows, col, sign, G):
                 G[r, j] += sign * v
 
 
-@kernel(I1, F2, INT, F2, I1, F1, FLOAT, BOOL, FLOAT, F2, F2, F2, BOOL)
+@kernel(I1, F2, INT, F2, I1, F1, FLOAT, BOOL, FLOAT, F2C, F2C, F2C, BOOL)
 def rows_and_jacobians(
     index, rows, n_first, geom_xpos, ga, pair_margins, max_recovery, hold_only, near,
     J, masks_a, masks_b, self_collision,

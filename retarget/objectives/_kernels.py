@@ -10,10 +10,10 @@ import, cached on disk: :mod:`retarget._jit`.
 
 from __future__ import annotations
 
-from retarget._jit import F1, F1W, F2, F2W, F3, I1, kernel
+from retarget._jit import F1, F1CW, F2, F2C, F2CW, F3C, I1, kernel
 
 
-@kernel(F2, F1, F1, F2W, F1W)
+@kernel(F2C, F1, F1, F2CW, F1CW)
 def weighted_gram(J, w, e, P, c):
     """``P += Jᵀ diag(w) J``, ``c += Jᵀ diag(w) e`` for ``J`` (m, nv)."""
     m, nv = J.shape
@@ -32,7 +32,7 @@ def weighted_gram(J, w, e, P, c):
                 P[a, b] += xa * J[i, b]
 
 
-@kernel(F3, F2, I1, I1, F2, F1, F2W, F1W)
+@kernel(F3C, F2, I1, I1, F2, F1, F2CW, F1CW)
 def site_gram(J_sites, p_sites, rows_a, rows_b, targets, w, P, c):
     """The keypoint (``rows_b`` empty: ``e = p_a − target``) or vector
     (``e = p_a − p_b − target``) terms of sites ``rows_a`` (and ``rows_b``), rows into the
@@ -67,7 +67,7 @@ def site_gram(J_sites, p_sites, rows_a, rows_b, targets, w, P, c):
                         P[a, b] += xa * J_sites[sa, r, b]
 
 
-@kernel(F2W, F1W, F1, F1)
+@kernel(F2CW, F1CW, F1, F1)
 def add_diagonal(P, c, w, r):
     """``P += diag(w)``, ``c += w ⊙ r`` (a row-selection Jacobian's terms)."""
     for a in range(w.shape[0]):
