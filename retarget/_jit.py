@@ -23,8 +23,8 @@ def _array(dtype, ndim: int, writable: bool = False, layout: str = "A"):
     return nt.Array(dtype, ndim, layout, readonly=not writable)
 
 
-F1, F2 = (_array(nt.float64, n) for n in (1, 2))
-"""Read-only float64 arrays of 1 and 2 dimensions, any layout (views the solver slices)."""
+F1, F2, F3 = (_array(nt.float64, n) for n in (1, 2, 3))
+"""Read-only float64 arrays of 1, 2 and 3 dimensions, any layout (views the solver slices)."""
 F2W = _array(nt.float64, 2, writable=True)
 """A writable float64 array filled in place."""
 F2C, F3C = (_array(nt.float64, n, layout="C") for n in (2, 3))

@@ -235,6 +235,10 @@ def test_surface_contact_tangent_weight_scales_only_the_tangential_pull(demo):
     H0, c0 = Objective.qp_terms(rt.contacts, s)
     np.testing.assert_allclose(H, H0, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(c, c0, rtol=1e-10, atol=1e-12)
+    Pa, ca = np.zeros_like(H), np.zeros_like(c)
+    rt.contacts.accumulate(s, Pa, ca)  # build_qp's compiled pass, in the surface frames
+    np.testing.assert_allclose(Pa, H0, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(ca, c0, rtol=1e-10, atol=1e-12)
     idx = np.flatnonzero(active)
     pts = rt.contacts.finger_points(q)
     P = rt.contacts.finger_point_array(q)[idx]

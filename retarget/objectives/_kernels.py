@@ -10,7 +10,9 @@ import, cached on disk: :mod:`retarget._jit`.
 
 from __future__ import annotations
 
-from retarget._jit import F1, F1CW, F2, F2C, F2CW, F3C, I1, kernel
+import numpy as np
+
+from retarget._jit import BOOL, F1, F1CW, F2, F2C, F2CW, F3, F3C, FLOAT, I1, kernel
 
 
 @kernel(F2C, F1, F1, F2CW, F1CW)
@@ -74,3 +76,45 @@ def add_diagonal(P, c, w, r):
         if w[a] != 0.0:
             P[a, a] += w[a]
             c[a] += w[a] * r[a]
+
+
+@kernel(F3C, F2, F2, F3, I1, BOOL, FLOAT, F1, FLOAT, F2CW, F1CW)
+def surface_gram(J, points, targets, frames, idx, split, weight, ramp, tangent_weight, P, c):
+    """The surface-contact term of the active fingers ``idx``: per finger ``k`` (finger
+    ``f = idx[k]``) the error ``points[k] − targets[f]`` and its point Jacobian ``J[k]``
+    (3, nv), in the target's (normal, t₁, t₂) frame ``frames[f]`` when ``split`` (the
+    tangential rows weighted ``tangent_weight``), each row weighted ``weight · ramp[f]``."""
+    nv = P.shape[0]
+    row = np.empty(nv)
+    d = np.empty(3)
+    for k in range(idx.shape[0]):
+        f = idx[k]
+        for r in range(3):
+            d[r] = points[k, r] - targets[f, r]
+        for r in range(3):
+            wi = weight * ramp[f]
+            if split and r > 0:
+                wi *= tangent_weight
+            if wi == 0.0:
+                continue
+            if split:
+                e = frames[f, r, 0] * d[0] + frames[f, r, 1] * d[1] + frames[f, r, 2] * d[2]
+                for b in range(nv):
+                    row[b] = (
+                        frames[f, r, 0] * J[k, 0, b]
+                        + frames[f, r, 1] * J[k, 1, b]
+                        + frames[f, r, 2] * J[k, 2, b]
+                    )
+            else:
+                e = d[r]
+                for b in range(nv):
+                    row[b] = J[k, r, b]
+            wei = wi * e
+            for a in range(nv):
+                x = row[a]
+                if x == 0.0:
+                    continue
+                c[a] += x * wei
+                xa = x * wi
+                for b in range(nv):
+                    P[a, b] += xa * row[b]

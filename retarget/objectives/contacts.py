@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from retarget.errors import RetargetError
-from retarget.objectives._kernels import weighted_gram
+from retarget.objectives._kernels import surface_gram
 from retarget.objectives.base import Objective
 from retarget.state import RobotState
 
@@ -290,6 +290,12 @@ class SurfaceContactObjective(Objective):
 
     def accumulate(self, state: RobotState, P: np.ndarray, c: np.ndarray) -> None:
         idx = np.flatnonzero(self.active)
-        if idx.size:
-            e, J = self._error_and_jacobian(state, idx)
-            weighted_gram(J, self.weights(e.size), e, P, c)
+        if not idx.size:
+            return
+        pts = self.finger_points(state.q)
+        points = self.finger_point_array(state.q)[idx]
+        J = state.kin.point_jacobians(tuple(pts[i][0] for i in idx.tolist()), points)
+        surface_gram(
+            np.ascontiguousarray(J), points, self.points, self._frames, idx, self._split,
+            float(self.weight), self.ramp, self.tangent_weight, P, c,
+        )  # fmt: skip
