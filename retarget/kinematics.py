@@ -213,8 +213,8 @@ class PinocchioKinematics:
         mujoco.mj_kinematics(self.mj_model, self._mj_data)
         self._site_jac = None
 
-    def _site_rows(self, sites: tuple[str, ...]) -> np.ndarray:
-        """Rows of ``sites`` in the all-sites arrays, memoised per name tuple."""
+    def site_rows(self, sites: tuple[str, ...]) -> np.ndarray:
+        """(k,) rows of ``sites`` in :meth:`site_arrays`, memoised per name tuple."""
         rows = self._ids.get(sites)
         if rows is None:
             for s in sites:
@@ -222,10 +222,6 @@ class PinocchioKinematics:
             rows = np.array([self._site_row[s] for s in sites], dtype=int)
             self._ids[sites] = rows
         return rows
-
-    def site_rows(self, sites: tuple[str, ...]) -> np.ndarray:
-        """(k,) rows of ``sites`` in :meth:`site_arrays` (memoised per name tuple)."""
-        return self._site_rows(sites)
 
     def site_arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """Every site's Jacobian (nsite, 6, nv) and world position (nsite, 3) [m] at the last
@@ -244,10 +240,6 @@ class PinocchioKinematics:
             J.flags.writeable = False  # shared until the next forward(): callers must copy
             self._site_jac = J
         return self._site_jac
-
-    def _world_jacobian(self) -> np.ndarray:
-        """(6, nv) ``data.J`` after :meth:`forward`, row-major."""
-        return self._J
 
     def world_jacobian(self) -> np.ndarray:
         """(6, nv) every joint's motion at the last :meth:`forward` as a world-frame twist
@@ -278,11 +270,11 @@ class PinocchioKinematics:
 
     def site_positions(self, sites: tuple[str, ...]) -> np.ndarray:
         """(k, 3) world positions [m] of several sites after :meth:`forward`."""
-        return self._all_site_positions()[self._site_rows(tuple(sites))]
+        return self._all_site_positions()[self.site_rows(tuple(sites))]
 
     def site_jacobians(self, sites: tuple[str, ...]) -> np.ndarray:
         """(k, 6, nv) Jacobians of several sites (as :meth:`site_jacobian`)."""
-        return self._all_site_jacobians()[self._site_rows(tuple(sites))]
+        return self._all_site_jacobians()[self.site_rows(tuple(sites))]
 
     def point_jacobians(self, bodies: tuple[str, ...], p_world: np.ndarray) -> np.ndarray:
         """(k, 3, nv) Jacobians of points (k, 3) [m, world] fixed to ``bodies`` (one each)."""
@@ -313,16 +305,16 @@ class PinocchioKinematics:
 
     def site_position(self, site: str) -> np.ndarray:
         """(3,) world position [m] of a site after :meth:`forward`."""
-        return self._mj_data.site_xpos[self._site_rows((site,))[0]].copy()
+        return self._mj_data.site_xpos[self.site_rows((site,))[0]].copy()
 
     def site_rotation(self, site: str) -> np.ndarray:
         """(3, 3) world rotation of a site after :meth:`forward`."""
-        return self._mj_data.site_xmat[self._site_rows((site,))[0]].reshape(3, 3).copy()
+        return self._mj_data.site_xmat[self.site_rows((site,))[0]].reshape(3, 3).copy()
 
     def site_jacobian(self, site: str) -> np.ndarray:
         """(6, nv) Jacobian of a site: linear velocity of its origin and angular velocity, both
         in world axes (Pinocchio ``LOCAL_WORLD_ALIGNED``), after :meth:`forward`."""
-        return self._all_site_jacobians()[self._site_rows((site,))[0]]
+        return self._all_site_jacobians()[self.site_rows((site,))[0]]
 
     def point_jacobian(self, body: str, p_world: np.ndarray) -> np.ndarray:
         """(3, nv) Jacobian of a point rigidly attached to ``body``, given in world coordinates."""

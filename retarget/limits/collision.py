@@ -551,7 +551,7 @@ class CollisionLimit(Limit):
         J = kin.point_jacobians(tuple(self._bodies_a[index]), out[:, K.PA : K.PA + 3])
         if self.self_collision:  # J = J_a − J_b
             J = J - kin.point_jacobians(tuple(self._bodies_b[index]), out[:, K.PB : K.PB + 3])
-        return np.einsum("ki,kij->kj", n, J).reshape(-1, state.nv), out[:, K.D].copy()
+        return np.einsum("ki,kij->kj", n, J), out[:, K.D].copy()
 
 
 def _pair_distances(index: np.ndarray, rows: np.ndarray) -> PairDistances:

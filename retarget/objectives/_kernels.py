@@ -11,27 +11,32 @@ import, cached on disk: :mod:`retarget._jit`.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from retarget._jit import BOOL, F1, F1CW, F2, F2C, F2CW, F3, F3C, FLOAT, I1, kernel
+
+
+@njit(cache=True)
+def _add_row(row, wi, e, P, c):
+    """``P += wi · row rowᵀ``, ``c += wi · e · row`` for one error row (skipping ``row``'s
+    zeros: a finger's rows touch its own joints and the wrist's)."""
+    wei = wi * e
+    for a in range(row.shape[0]):
+        x = row[a]
+        if x == 0.0:
+            continue
+        c[a] += x * wei
+        xa = x * wi
+        for b in range(row.shape[0]):
+            P[a, b] += xa * row[b]
 
 
 @kernel(F2C, F1, F1, F2CW, F1CW)
 def weighted_gram(J, w, e, P, c):
     """``P += Jᵀ diag(w) J``, ``c += Jᵀ diag(w) e`` for ``J`` (m, nv)."""
-    m, nv = J.shape
-    for i in range(m):
-        wi = w[i]
-        if wi == 0.0:
-            continue
-        wei = wi * e[i]
-        for a in range(nv):
-            x = J[i, a]
-            if x == 0.0:
-                continue
-            c[a] += x * wei
-            xa = x * wi
-            for b in range(nv):
-                P[a, b] += xa * J[i, b]
+    for i in range(J.shape[0]):
+        if w[i] != 0.0:
+            _add_row(J[i], w[i], e[i], P, c)
 
 
 @kernel(F3C, F2, I1, I1, F2, F1, F2CW, F1CW)
@@ -40,33 +45,21 @@ def site_gram(J_sites, p_sites, rows_a, rows_b, targets, w, P, c):
     (``e = p_a − p_b − target``) terms of sites ``rows_a`` (and ``rows_b``), rows into the
     kinematics' all-sites arrays ``J_sites`` (nsite, ≥3, nv) and ``p_sites`` (nsite, 3);
     ``targets`` (k, 3), ``w`` (3k,) per error row."""
-    nv = P.shape[0]
     pairs = rows_b.shape[0] > 0
+    row = np.empty(P.shape[0])
     for k in range(rows_a.shape[0]):
         sa = rows_a[k]
-        sb = rows_b[k] if pairs else 0
         for r in range(3):
             wi = w[3 * k + r]
             if wi == 0.0:
                 continue
-            e = p_sites[sa, r] - targets[k, r]
             if pairs:
+                sb = rows_b[k]
                 e = p_sites[sa, r] - p_sites[sb, r] - targets[k, r]
-            wei = wi * e
-            for a in range(nv):
-                x = J_sites[sa, r, a]
-                if pairs:
-                    x -= J_sites[sb, r, a]
-                if x == 0.0:
-                    continue
-                c[a] += x * wei
-                xa = x * wi
-                if pairs:
-                    for b in range(nv):
-                        P[a, b] += xa * (J_sites[sa, r, b] - J_sites[sb, r, b])
-                else:
-                    for b in range(nv):
-                        P[a, b] += xa * J_sites[sa, r, b]
+                row[:] = J_sites[sa, r] - J_sites[sb, r]
+                _add_row(row, wi, e, P, c)
+            else:
+                _add_row(J_sites[sa, r], wi, p_sites[sa, r] - targets[k, r], P, c)
 
 
 @kernel(F2CW, F1CW, F1, F1)
@@ -84,8 +77,7 @@ def surface_gram(J, points, targets, frames, idx, split, weight, ramp, tangent_w
     ``f = idx[k]``) the error ``points[k] − targets[f]`` and its point Jacobian ``J[k]``
     (3, nv), in the target's (normal, t₁, t₂) frame ``frames[f]`` when ``split`` (the
     tangential rows weighted ``tangent_weight``), each row weighted ``weight · ramp[f]``."""
-    nv = P.shape[0]
-    row = np.empty(nv)
+    row = np.empty(P.shape[0])
     d = np.empty(3)
     for k in range(idx.shape[0]):
         f = idx[k]
@@ -98,23 +90,9 @@ def surface_gram(J, points, targets, frames, idx, split, weight, ramp, tangent_w
             if wi == 0.0:
                 continue
             if split:
-                e = frames[f, r, 0] * d[0] + frames[f, r, 1] * d[1] + frames[f, r, 2] * d[2]
-                for b in range(nv):
-                    row[b] = (
-                        frames[f, r, 0] * J[k, 0, b]
-                        + frames[f, r, 1] * J[k, 1, b]
-                        + frames[f, r, 2] * J[k, 2, b]
-                    )
+                u = frames[f, r]
+                e = u[0] * d[0] + u[1] * d[1] + u[2] * d[2]
+                row[:] = u[0] * J[k, 0] + u[1] * J[k, 1] + u[2] * J[k, 2]
+                _add_row(row, wi, e, P, c)
             else:
-                e = d[r]
-                for b in range(nv):
-                    row[b] = J[k, r, b]
-            wei = wi * e
-            for a in range(nv):
-                x = row[a]
-                if x == 0.0:
-                    continue
-                c[a] += x * wei
-                xa = x * wi
-                for b in range(nv):
-                    P[a, b] += xa * row[b]
+                _add_row(J[k, r], wi, d[r], P, c)

@@ -268,14 +268,13 @@ class SurfaceContactObjective(Objective):
         )
         return self._in_surface_frames(idx, J).reshape(-1, state.nv)
 
-    def _error_and_jacobian(self, state: RobotState, idx: np.ndarray):
-        """:meth:`error` and :meth:`jacobian` of the active fingers ``idx`` in one pass."""
-        nv = state.nv
+    def _points_and_jacobians(self, state: RobotState, idx: np.ndarray):
+        """The active fingers' (``idx``) surface points nearest the object (k, 3) [m] and
+        their point Jacobians (k, 3, nv), world axes."""
         pts = self.finger_points(state.q)
-        P = self.finger_point_array(state.q)[idx]
-        e = self._in_surface_frames(idx, P - self.points[idx]).reshape(-1)
-        J = state.kin.point_jacobians(tuple(pts[i][0] for i in idx.tolist()), P)
-        return e, np.ascontiguousarray(self._in_surface_frames(idx, J).reshape(-1, nv))
+        points = self.finger_point_array(state.q)[idx]
+        J = state.kin.point_jacobians(tuple(pts[i][0] for i in idx.tolist()), points)
+        return points, np.ascontiguousarray(J)
 
     def qp_terms(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`error` and :meth:`jacobian` in one pass over the active fingers (the same
@@ -284,18 +283,17 @@ class SurfaceContactObjective(Objective):
         idx = np.flatnonzero(self.active)
         if not idx.size:
             return np.zeros((nv, nv)), np.zeros(nv)
-        e, J = self._error_and_jacobian(state, idx)
+        points, J = self._points_and_jacobians(state, idx)
+        e = self._in_surface_frames(idx, points - self.points[idx]).reshape(-1)
+        J = self._in_surface_frames(idx, J).reshape(-1, nv)
         JW = J.T * self.weights(e.size)
         return JW @ J, JW @ e
 
     def accumulate(self, state: RobotState, P: np.ndarray, c: np.ndarray) -> None:
         idx = np.flatnonzero(self.active)
-        if not idx.size:
-            return
-        pts = self.finger_points(state.q)
-        points = self.finger_point_array(state.q)[idx]
-        J = state.kin.point_jacobians(tuple(pts[i][0] for i in idx.tolist()), points)
-        surface_gram(
-            np.ascontiguousarray(J), points, self.points, self._frames, idx, self._split,
-            float(self.weight), self.ramp, self.tangent_weight, P, c,
-        )  # fmt: skip
+        if idx.size:
+            points, J = self._points_and_jacobians(state, idx)
+            surface_gram(
+                J, points, self.points, self._frames, idx, self._split, float(self.weight),
+                self.ramp, self.tangent_weight, P, c,
+            )  # fmt: skip
