@@ -610,10 +610,11 @@ class Retargeter:
         # Hand geoms reach as far as the self pairs need, the object and table as far as the
         # hand–object pairs need (a pair's reach is the larger of its geoms').
         self.sweep = ContactSweep(m, self.scene.data, self.nq)
-        self.sweep.set_margins(self.scene.hand_geoms, c.self_collision_distmax)
         self.sweep.set_margins(
+            self.scene.hand_geoms,
+            c.self_collision_distmax,
             self.scene.object_geoms + self.scene.table_geoms,
-            max(c.collision_distmax, c.self_collision_distmax),
+            c.collision_distmax,
         )
         self.collision = None  # the non-penetration limit (when use_collision)
         self.distance_query = None  # the same query, for metrics, whatever use_collision says

@@ -14,6 +14,7 @@ from retarget.hands import available_hands, get_hand
 from retarget.hands.base import wrist_qpos_from_mano
 from retarget.kinematics import MujocoKinematics, PinocchioKinematics
 from retarget.limits import CollisionLimit
+from retarget.limits.collision import ContactSweep
 from retarget.retargeter import RetargetConfig, Retargeter
 from retarget.state import RobotState
 
@@ -288,16 +289,17 @@ def test_compiled_rows_match_the_generic_rows(rt, demo_cube):
 def test_contact_sweep_matches_per_pair_distances(name, demo_cube):
     """The shared mj_collision sweep (the retargeter's default) finds the same pairs, distances,
     nearest points and normals as one mj_geomDistance per pair, for the hand–object and the
-    self-collision pairs (box–box and mesh pairs go per pair inside the sweep limit too, with
-    the sphere test as their broad phase: mj_collision misses box–box pairs a few millimetres
-    inside its margin, Panda on the example cube2: 25.7–29.8 mm apart with a 30 mm margin).
+    self-collision pairs (box–box and mesh pairs go per pair inside the sweep limit too: the
+    box–box ones with the sphere test as their broad phase, as mj_collision misses box–box
+    pairs a few millimetres inside its margin, Panda on the example cube2: 25.7–29.8 mm apart
+    with a 30 mm margin; the mesh ones with the sweep's reported pairs as candidates).
     Not Ability: its penetrating capsule–mesh pairs' witness points differ by up to 64 µm."""
     rt = Retargeter(get_hand(name), object_geometry("cube2"))
     m, d = rt.scene.model, rt.scene.data
     traj = demo_cube
     tg = rt.human_targets(traj)
     rng = np.random.default_rng(7)
-    compared = direct = 0
+    compared = direct = mesh = 0
     for swept in (rt.collision, rt.self_collision):
         plain = CollisionLimit(m, d, swept.pairs, rt.nq, distmax=swept.distmax,
                                self_collision=swept.self_collision)  # fmt: skip
@@ -315,8 +317,86 @@ def test_contact_sweep_matches_per_pair_distances(name, demo_cube):
             np.testing.assert_allclose(a.normal[oa][ok], b.normal[ob][ok], atol=1e-9)
             compared += a.index.size
             direct += int(np.isin(a.index, swept._direct_seen).sum())
+            mesh += int(np.isin(a.index, swept._mesh_seen).sum())
     assert compared > 50
     assert direct > 0  # the per-pair path inside the sweep limit was compared too
+    if name in ("svh", "panda"):
+        assert mesh > 0  # and its mesh pairs, candidates from the sweep
+
+
+@pytest.mark.parametrize(("hand_reach", "other_reach"), [(0.01, 0.03), (0.03, 0.01)])
+def test_contact_sweep_margins_give_the_asked_reaches(hand_reach, other_reach):
+    """mj_collision reports hand–hand pairs up to ``hand_reach`` and hand–object pairs up to
+    at least ``other_reach``, whatever the installed MuJoCo does with two geoms' margins (4.0.1
+    adds them), and ``query_distance`` says how far."""
+    xml = """
+    <mujoco>
+      <worldbody>
+        <body name="a"><joint name="ax" type="slide" axis="1 0 0"/>
+          <geom name="a" type="sphere" size="0.01"/></body>
+        <body name="b" pos="0 0.2 0"><joint name="bx" type="slide" axis="1 0 0"/>
+          <geom name="b" type="sphere" size="0.01"/></body>
+        <body name="object" mocap="true" pos="0 0.4 0">
+          <geom name="object" type="sphere" size="0.01"/></body>
+      </worldbody>
+    </mujoco>"""
+    m = mujoco.MjModel.from_xml_string(xml)
+    d = mujoco.MjData(m)
+    a, b, obj = (m.geom(n).id for n in ("a", "b", "object"))
+    sweep = ContactSweep(m, d, hand_nq=2)
+    sweep.set_margins([a, b], hand_reach, [obj], other_reach)
+    assert sweep.query_distance(a, b) == pytest.approx(hand_reach, abs=1e-15)
+    reach = sweep.query_distance(a, obj)
+    assert reach >= other_reach - 1e-15
+
+    def reported(g1, g2, gap):  # the two spheres ``gap`` apart along y
+        m.body_pos[m.geom_bodyid[g2]] = m.body_pos[m.geom_bodyid[g1]] + [0.0, 0.02 + gap, 0.0]
+        if g2 == obj:
+            d.mocap_pos[0] = m.body_pos[m.geom_bodyid[g1]] + [0.0, 0.02 + gap, 0.0]
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_collision(m, d)
+        return any({int(c.geom1), int(c.geom2)} == {g1, g2} for c in d.contact[: d.ncon])
+
+    assert reported(a, b, hand_reach - 5e-4) and not reported(a, b, hand_reach + 5e-4)
+    assert reported(a, obj, reach - 5e-4) and not reported(a, obj, reach + 5e-4)
+
+
+def test_capsule_beside_a_cylinder_rim_gets_its_true_distance():
+    """A capsule 1.6 mm beside a cylinder's rim (Shadow's middle distal over the built-in
+    cylinder1, retargeted): mj_collision (MuJoCo 4.0.1) reports the pair 18 mm apart, so the
+    sweep limit must take capsule–cylinder pairs per pair, at mj_geomDistance's distance."""
+    xml = """
+    <mujoco>
+      <worldbody>
+        <body name="hand" pos="0.01456463 -0.03674637 0.06018636">
+          <joint name="x" type="slide" axis="1 0 0"/>
+          <joint name="y" type="slide" axis="0 1 0"/>
+          <joint name="z" type="slide" axis="0 0 1"/>
+          <geom name="tip" type="capsule" size="0.00705"
+                fromto="0.00617 0.01028 0.00041 -0.00617 -0.01028 -0.00041"/>
+        </body>
+        <body name="object" mocap="true">
+          <geom name="cylinder" type="cylinder" size="0.025 0.06"/>
+        </body>
+      </worldbody>
+    </mujoco>"""
+    m = mujoco.MjModel.from_xml_string(xml)
+    d = mujoco.MjData(m)
+    tip, cyl = m.geom("tip").id, m.geom("cylinder").id
+    sweep = ContactSweep(m, d, hand_nq=3)
+    sweep.set_margins([tip], 0.01, [cyl], 0.03)
+    lim = CollisionLimit(m, d, [(tip, cyl)], hand_nq=3, distmax=0.03, sweep=sweep)
+    for dz in (0.0, -0.001, 0.002):  # beside the rim, and a little below and above it
+        q = np.array([0.0, 0.0, dz])
+        d.qpos[:] = q
+        mujoco.mj_kinematics(m, d)
+        fromto = np.zeros(6)
+        expected = mujoco.mj_geomDistance(m, d, tip, cyl, 0.03, fromto)
+        assert 0.0 < expected < 0.004
+        r = lim.query(q)
+        np.testing.assert_array_equal(r.index, [0])
+        assert r.distance[0] == pytest.approx(expected, abs=1e-12)
+        np.testing.assert_allclose(r.p_a[0], fromto[:3], atol=1e-12)
 
 
 def test_contact_sweep_follows_the_object(demo_cube):

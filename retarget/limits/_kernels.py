@@ -224,6 +224,32 @@ def broad_phase(xpos, xmat, sph, sph_a, sph_b, reach2, pln, pln_a, pln_b, pln_re
     return out[:m].copy()
 
 
+@kernel(I1, I1, I1)
+def seen_candidates(pair, seen_map, extra):
+    """The per-pair path's candidates, ascending: the pairs ``seen_map`` maps a reported
+    contact's registered pair to (``pair``: :func:`sweep_select`'s registered pair indices;
+    −1: not one of them) and the pairs ``extra`` (the broad phase's)."""
+    n = 0
+    for j in range(pair.shape[0]):
+        n = max(n, seen_map[pair[j]] + 1)
+    for i in range(extra.shape[0]):
+        n = max(n, extra[i] + 1)
+    mark = np.zeros(n, np.bool_)
+    for j in range(pair.shape[0]):
+        s = seen_map[pair[j]]
+        if s >= 0:
+            mark[s] = True
+    for i in range(extra.shape[0]):
+        mark[extra[i]] = True
+    out = np.empty(n, np.int64)
+    m = 0
+    for i in range(n):
+        if mark[i]:
+            out[m] = i
+            m += 1
+    return out[:m].copy()
+
+
 @kernel(F2W)
 def set_normals(rows):
     """Fill the ``N`` columns of packed rows from their points: ``(p_b − p_a) / ±|p_b − p_a|``

@@ -18,13 +18,16 @@ Two ways to find the pairs within ``distmax``, with the same result:
   the same narrow phase (the pair's collision function run with ``distmax`` as margin, keeping
   its closest contact), so the sweep keeps each pair's closest contact; it needs those pairs to
   pass MuJoCo's contact filters and margins of at least ``distmax``, which
-  :class:`CollisionLimit` checks. Box–box and mesh pairs are not the same (``mj_collision``'s
-  multi-contact routines report depths up to millimetres off the Euclidean distance that
-  ``mj_geomDistance`` computes), so they keep the per-pair path. Mesh pairs come closer but
-  not close enough (SVH, Ability and Panda on the example cube2, 60 frames of random finger
-  poses, MuJoCo 4.0.1: every pair found, distances within 0.32 mm, but the directions differ
-  by up to 10° at 3 mm or more apart and 27° when penetrating), though the per-pair path is
-  SVH's largest collision cost (cProfile, one 724-frame retarget: 0.63 of 3.8 s).
+  :class:`CollisionLimit` checks. Capsule–cylinder pairs are the exception (``_swept_pair``:
+  the sweep puts some capsules near a cylinder's cap up to 19 mm too far). Those, box–box and
+  mesh pairs keep the per-pair path (``mj_collision``'s multi-contact routines report depths
+  up to millimetres off the Euclidean distance that ``mj_geomDistance`` computes). Mesh pairs
+  come closer but not close enough (SVH, Ability and Panda on the example cube2, 60 frames of
+  random finger poses, MuJoCo 4.0.1: every pair found, distances within 0.32 mm, but the
+  directions differ by up to 10° at 3 mm or more apart and 27° when penetrating); the sweep
+  does find them, so the mesh pairs it reports are their per-pair candidates, in place of the
+  bounding-sphere broad phase (SVH, Ability and Panda, twelve objects, retargeted and random
+  poses: none of 30,000 mesh pairs within ``distmax`` missing).
 """
 
 from __future__ import annotations
@@ -70,12 +73,53 @@ def _pose(
     return d
 
 
-# Pairs with one of these geoms get identical answers from mj_collision and mj_geomDistance.
+# Pairs with one of these geoms get identical answers from mj_collision and mj_geomDistance,
+# except capsule–cylinder (_swept_pair).
 _SWEEP_TYPES = {
     int(mujoco.mjtGeom.mjGEOM_PLANE),
     int(mujoco.mjtGeom.mjGEOM_SPHERE),
     int(mujoco.mjtGeom.mjGEOM_CAPSULE),
 }
+_CAPSULE_CYLINDER = {int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_CYLINDER)}
+
+
+def _margins_add() -> bool:
+    """Whether ``mj_collision`` reports a geom pair up to the sum of the two geoms' margins
+    (MuJoCo 4.0.1) rather than the larger one: two spheres with margins of 10 mm, 15 mm apart,
+    make a contact only with the sum."""
+    m = mujoco.MjModel.from_xml_string(
+        """<mujoco><worldbody>
+        <body><freejoint/><geom type="sphere" size="0.1" margin="0.01"/></body>
+        <body pos="0 0 0.215"><freejoint/><geom type="sphere" size="0.1" margin="0.01"/></body>
+        </worldbody></mujoco>"""
+    )
+    d = mujoco.MjData(m)
+    mujoco.mj_kinematics(m, d)
+    mujoco.mj_collision(m, d)
+    return d.ncon == 1
+
+
+_MARGINS_ADD = _margins_add()
+
+
+def _pair_margin(a, b):
+    """A geom pair's margin (or gap) from the two geoms': their sum or the larger one
+    (:func:`_margins_add`)."""
+    return a + b if _MARGINS_ADD else np.maximum(a, b)
+
+
+def _swept_pair(type_a: int, type_b: int) -> bool:
+    """Whether a pair of these geom types can take its distance from the sweep.
+
+    Not capsule–cylinder: ``mj_collision`` (MuJoCo 4.0.1) reports some capsules near a
+    cylinder's cap up to 19 mm farther than they are (Shadow's middle distal over the built-in
+    cylinder1's top: 18.0 mm against ``mj_geomDistance``'s 1.6 mm, whose witness points lie
+    1.6 mm apart). Retargeted and random poses, all hands, twelve objects: 30 of 3,862 such
+    pairs off by more than 0.1 mm, every other type pair within 1.1 mm (sphere–mesh) and most
+    exact."""
+    if {type_a, type_b} == _CAPSULE_CYLINDER:
+        return False
+    return type_a in _SWEEP_TYPES or type_b in _SWEEP_TYPES
 
 
 class ContactSweep:
@@ -147,17 +191,33 @@ class ContactSweep:
         self.invalidate()
         return offset
 
-    def set_margins(self, geoms: Sequence[int], margin: float) -> None:
-        """Query distance [m] of ``geoms``: a pair is reported up to the larger of its two geom
-        margins (explicit ``<pair>``s get the same); gaps are set to 0, and the midphase is off.
+    def set_margins(
+        self,
+        hand_geoms: Sequence[int],
+        hand_reach: float,
+        other_geoms: Sequence[int] = (),
+        other_reach: float = 0.0,
+    ) -> None:
+        """Query distances [m]: ``mj_collision`` reports two hand geoms up to ``hand_reach``
+        apart, a hand geom and one of ``other_geoms`` (object, table) up to ``other_reach``
+        (at least). Sets the geom margins for the installed MuJoCo's rule (:func:`_pair_margin`:
+        4.0.1 adds the two geoms' margins), explicit ``<pair>``s to the same, gaps to 0, and
+        turns the midphase off.
         """
         m = self.model
         # The BVH midphase prunes body pairs without the margins (pairs within them go missing).
         m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_MIDPHASE
-        m.geom_margin[list(geoms)] = margin
-        m.geom_gap[list(geoms)] = 0.0
+        if _MARGINS_ADD:
+            hand = 0.5 * hand_reach
+            other = max(other_reach - hand, 0.0)
+        else:
+            hand, other = hand_reach, max(other_reach, hand_reach)
+        m.geom_margin[list(hand_geoms)] = hand
+        m.geom_margin[list(other_geoms)] = other
+        m.geom_gap[list(hand_geoms) + list(other_geoms)] = 0.0
         if m.npair:
-            m.pair_margin[:] = np.maximum(m.geom_margin[m.pair_geom1], m.geom_margin[m.pair_geom2])
+            g1, g2 = m.pair_geom1, m.pair_geom2
+            m.pair_margin[:] = _pair_margin(m.geom_margin[g1], m.geom_margin[g2])
             m.pair_gap[:] = 0.0
         self.invalidate()
 
@@ -218,7 +278,8 @@ class ContactSweep:
             if {int(m.pair_geom1[p]), int(m.pair_geom2[p])} == {ga, gb}:
                 return float(m.pair_margin[p] - m.pair_gap[p])
         margin = float(
-            max(m.geom_margin[ga], m.geom_margin[gb]) - max(m.geom_gap[ga], m.geom_gap[gb])
+            _pair_margin(m.geom_margin[ga], m.geom_margin[gb])
+            - _pair_margin(m.geom_gap[ga], m.geom_gap[gb])
         )
         if not (
             m.geom_contype[ga] & m.geom_conaffinity[gb]
@@ -320,24 +381,14 @@ class CollisionLimit(Limit):
         swept = np.zeros(len(self.pairs), bool)
         if sweep is not None:
             t = model.geom_type
-            swept = np.array([t[a] in _SWEEP_TYPES or t[b] in _SWEEP_TYPES for a, b in self.pairs])
+            swept = np.array([_swept_pair(int(t[a]), int(t[b])) for a, b in self.pairs])
         self._swept = np.flatnonzero(swept)
-        b_plane = (model.geom_type[gb] == plane) & ~swept
-        # Sphere pairs: bounding spheres about geom_xpos; centre distance beyond the radii's sum
-        # plus distmax cannot be within distmax.
-        self._sph = np.flatnonzero(~b_plane & ~swept)
-        self._sph_a, self._sph_b = ga[self._sph], gb[self._sph]
-        reach = model.geom_rbound[self._sph_a] + model.geom_rbound[self._sph_b] + distmax
-        self._sph_reach2 = reach**2
-        # Plane pairs (geom_b a plane, e.g. the table): the hand geom's bounding sphere against
-        # the plane's half-space.
-        self._pln = np.flatnonzero(b_plane)
-        self._pln_a, self._pln_b = ga[self._pln], gb[self._pln]
-        self._pln_reach = model.geom_rbound[self._pln_a] + distmax
+        self._broad_phase_sets(np.flatnonzero(~swept))
         self._bodies_a = np.array([self._body_names[b] for b in model.geom_bodyid[ga]], object)
         self._bodies_b = np.array([self._body_names[b] for b in model.geom_bodyid[gb]], object)
         self._fromto = np.zeros(6)
         self._direct_seen = np.zeros(0, int)
+        self._mesh_seen = np.zeros(0, int)  # the per-pair pairs with a mesh the sweep sees
         self._direct_offset = 0
         self._no_rows = (np.zeros(0, int), np.zeros((0, _kernels.WIDTH)))
         for x in self._no_rows:
@@ -369,9 +420,36 @@ class CollisionLimit(Limit):
             seen = [i for i in direct.tolist() if sweep.query_distance(*self.pairs[i]) >= distmax]
             self._direct_seen = np.array(seen, dtype=int)
             self._direct_offset = sweep.register([self.pairs[i] for i in seen])
+            # Mesh pairs the sweep sees: it reports their contacts out to its margins
+            # (≥ distmax), so their candidates are the pairs it reports; the broad phase keeps
+            # the others (mj_collision's box–box routine misses pairs millimetres inside its
+            # margin, see the module docstring).
+            mesh = int(mujoco.mjtGeom.mjGEOM_MESH)
+            t = model.geom_type
+            self._mesh_seen = np.array(
+                [i for i in seen if mesh in (t[self.pairs[i][0]], t[self.pairs[i][1]])], dtype=int
+            )
+            self._broad_phase_sets(np.setdiff1d(direct, self._mesh_seen))
+
+    def _broad_phase_sets(self, pairs: np.ndarray) -> None:
+        """The broad phase's pairs (indices, no swept ones) and their reaches."""
+        m, ga, gb, distmax = self.model, self._ga, self._gb, self.distmax
+        b_plane = m.geom_type[gb[pairs]] == mujoco.mjtGeom.mjGEOM_PLANE
+        # Sphere pairs: bounding spheres about geom_xpos; centre distance beyond the radii's sum
+        # plus distmax cannot be within distmax.
+        self._sph = pairs[~b_plane]
+        self._sph_a, self._sph_b = ga[self._sph], gb[self._sph]
+        reach = m.geom_rbound[self._sph_a] + m.geom_rbound[self._sph_b] + distmax
+        self._sph_reach2 = reach**2
+        # Plane pairs (geom_b a plane, e.g. the table): the hand geom's bounding sphere against
+        # the plane's half-space.
+        self._pln = pairs[b_plane]
+        self._pln_a, self._pln_b = ga[self._pln], gb[self._pln]
+        self._pln_reach = m.geom_rbound[self._pln_a] + distmax
 
     def candidates(self) -> np.ndarray:
-        """Indices of the pairs whose bounding volumes are within ``distmax`` (broad phase).
+        """Indices of the per-pair pairs whose bounding volumes are within ``distmax`` (broad
+        phase), except those a contact sweep sees (:meth:`_answer` takes theirs from it).
 
         Uses the geom poses already in ``data`` (call after ``mj_kinematics``).
         """
@@ -404,12 +482,18 @@ class CollisionLimit(Limit):
         key = (sw.version, self.distmax)
         if self._cached is not None and self._cached[0] == key:
             return self._cached[1]
-        swept_map, every_map = self._sweep_maps()
+        swept_map, every_map, mesh_map = self._sweep_maps()
         index, rows, n_first = _kernels.limit_select(
             sw.pair, sw.closest, sw.rows, swept_map, every_map, self.distmax
         )
         if self._swept.size != len(self.pairs):
-            d_index, d_rows = self._query_direct(q, kinematics=False)
+            # The per-pair pairs the sweep reports a contact for (within its margins: their
+            # mj_collision distances are within 0.32 mm of mj_geomDistance's, see the module
+            # docstring), and the broad phase's: SVH's 236 per-pair pairs, retargeting the
+            # built-in cube1, had 52 broad-phase candidates per iterate, 17 of them within
+            # distmax; 22 candidates now.
+            idx = _kernels.seen_candidates(sw.pair, mesh_map, self.candidates())
+            d_index, d_rows = self._query_direct(q, kinematics=False, idx=idx)
             if d_index.size:
                 index = np.concatenate([index[:n_first], d_index, index[n_first:]])
                 rows = np.concatenate([rows[:n_first], d_rows, rows[n_first:]])
@@ -420,15 +504,16 @@ class CollisionLimit(Limit):
         return answer
 
     def _query_direct(
-        self, q: np.ndarray, kinematics: bool = True
+        self, q: np.ndarray, kinematics: bool = True, idx: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
-        """The per-pair path: sphere broad phase, then ``mj_geomDistance`` per candidate;
-        ``(index, rows)`` of the pairs within ``distmax``, packed rows."""
+        """The per-pair path: ``mj_geomDistance`` per candidate (``idx``, ascending; default
+        the broad phase's); ``(index, rows)`` of the pairs within ``distmax``, packed rows."""
         m, d = self.model, self.data
         if kinematics:
             d.qpos[: self.hand_nq] = q
             mujoco.mj_kinematics(m, d)
-        idx = self.candidates()
+        if idx is None:
+            idx = self.candidates()
         if not idx.size:
             return self._no_rows
         rows = np.empty((idx.size, _kernels.WIDTH))
@@ -448,19 +533,23 @@ class CollisionLimit(Limit):
         _kernels.set_normals(rows)
         return np.array(keep), rows
 
-    def _sweep_maps(self) -> tuple[np.ndarray, np.ndarray]:
+    def _sweep_maps(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per pair registered on the sweep, this limit's pair index (-1: another limit's or
-        not this one's): for the swept pairs only, and for the swept and per-pair pairs (the
-        sweep's registrations can grow after this limit's, so rebuilt when they do)."""
+        not this one's): for the swept pairs only, for the swept and per-pair pairs, and for
+        the per-pair mesh pairs (the sweep's registrations can grow after this limit's, so
+        rebuilt when they do)."""
         n = self.sweep._ga.size
         if self._maps is None or self._maps[0].size != n:
             swept = np.full(n, -1)
             swept[self._offset : self._offset + self._swept.size] = self._swept
             every = swept.copy()
-            every[self._direct_offset : self._direct_offset + self._direct_seen.size] = (
-                self._direct_seen
+            direct = every[self._direct_offset : self._direct_offset + self._direct_seen.size]
+            direct[:] = self._direct_seen
+            mesh = np.full(n, -1)
+            mesh[self._direct_offset : self._direct_offset + self._direct_seen.size] = np.where(
+                np.isin(self._direct_seen, self._mesh_seen), self._direct_seen, -1
             )
-            self._maps = (swept, every)
+            self._maps = (swept, every, mesh)
         return self._maps
 
     def distances(self, q: np.ndarray) -> list[tuple[int, int, float, np.ndarray, np.ndarray]]:
