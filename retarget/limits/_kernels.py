@@ -250,6 +250,32 @@ def seen_candidates(pair, seen_map, extra):
     return out[:m].copy()
 
 
+@kernel(F2, F2, F2, F1)
+def coupling_rows(A1, A2, C, q):
+    """The coupling equalities' rows at ``q`` (``CouplingLimit.equalities``): with
+    ``sᵢ = Aᵢ q`` and the polynomial ``p`` of coefficients ``C`` (k, 5), ``(A₁ − p'(s₂) A₂,
+    p(s₂) − s₁)``."""
+    k, nv = A1.shape
+    A = np.empty((k, nv))
+    b = np.empty(k)
+    for r in range(k):
+        s1 = 0.0
+        s2 = 0.0
+        for j in range(nv):
+            s1 += A1[r, j] * q[j]
+            s2 += A2[r, j] * q[j]
+        p = C[r, 4]
+        dp = 4.0 * C[r, 4]
+        for i in range(3, -1, -1):  # Horner
+            p = p * s2 + C[r, i]
+            if i > 0:
+                dp = dp * s2 + i * C[r, i]
+        for j in range(nv):
+            A[r, j] = A1[r, j] - dp * A2[r, j]
+        b[r] = p - s1
+    return A, b
+
+
 @kernel(F2W)
 def set_normals(rows):
     """Fill the ``N`` columns of packed rows from their points: ``(p_b − p_a) / ±|p_b − p_a|``
