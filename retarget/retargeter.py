@@ -607,8 +607,8 @@ class Retargeter:
         self._servo_map = None  # (nq, nq) servoed joints → all (``_servo_follower_map``)
         # One mj_collision sweep per iterate finds the hand–object and hand–hand pairs within
         # their query distances, for both limits and the metrics (ContactSweep).
-        # Hand geoms reach as far as the self pairs need, the object and table as far as the
-        # hand–object pairs need (a pair's reach is the larger of its geoms').
+        # Hand–hand pairs are reported as far as the self pairs need, hand–object and
+        # hand–table pairs as far as the collision limit needs (ContactSweep.set_margins).
         self.sweep = ContactSweep(m, self.scene.data, self.nq)
         self.sweep.set_margins(
             self.scene.hand_geoms,
