@@ -35,6 +35,22 @@ def _random_pose(rt: Retargeter, rng, spread=(0.0, 1.0)) -> np.ndarray:
     return coupled(rt.scene.model, q)
 
 
+def _limit_poses(rt: Retargeter, traj, n: int, rng, spread):
+    """``(limit, plain, q)`` per collision limit of ``rt`` (the sweep's) and per ``n`` frames of
+    ``traj``: the same pairs without the sweep (``plain``), the object posed at the frame,
+    random finger poses (``spread`` of the ranges) at the human wrist's pose."""
+    tg = rt.human_targets(traj)
+    m, d = rt.scene.model, rt.scene.data
+    for lim in (rt.collision, rt.self_collision):
+        plain = CollisionLimit(m, d, lim.pairs, rt.nq, distmax=lim.distmax,
+                               self_collision=lim.self_collision)  # fmt: skip
+        for t in np.linspace(0, traj.num_frames - 1, n).astype(int):
+            rt.scene.set_object_pose(traj.object.pos[t], traj.object.rot_aa[t])
+            q = _random_pose(rt, rng, spread)
+            q[:6] = wrist_qpos_from_mano(tg["wrist_R"][t], tg["wrist_p"][t])
+            yield lim, plain, q
+
+
 def _finger_pair_penetration(rt: Retargeter, q: np.ndarray) -> float:
     """Deepest penetration [m] among the self pairs whose geoms are on two fingers (no palm)."""
     hand_parts = rt.hand.hand_parts(rt.scene.model)
@@ -295,33 +311,49 @@ def test_contact_sweep_matches_per_pair_distances(name, demo_cube):
     with a 30 mm margin; the mesh ones with the sweep's reported pairs as candidates).
     Not Ability: its penetrating capsule–mesh pairs' witness points differ by up to 64 µm."""
     rt = Retargeter(get_hand(name), object_geometry("cube2"))
-    m, d = rt.scene.model, rt.scene.data
-    traj = demo_cube
-    tg = rt.human_targets(traj)
     rng = np.random.default_rng(7)
     compared = direct = mesh = 0
-    for swept in (rt.collision, rt.self_collision):
-        plain = CollisionLimit(m, d, swept.pairs, rt.nq, distmax=swept.distmax,
-                               self_collision=swept.self_collision)  # fmt: skip
-        for t in np.linspace(0, traj.num_frames - 1, 12).astype(int):
-            rt.scene.set_object_pose(traj.object.pos[t], traj.object.rot_aa[t])
-            q = _random_pose(rt, rng, (0.1, 0.7))
-            q[:6] = wrist_qpos_from_mano(tg["wrist_R"][t], tg["wrist_p"][t])
-            a, b = swept.query(q), plain.query(q)
-            oa, ob = np.argsort(a.index), np.argsort(b.index)
-            np.testing.assert_array_equal(a.index[oa], b.index[ob])
-            np.testing.assert_allclose(a.distance[oa], b.distance[ob], atol=1e-12)
-            np.testing.assert_allclose(a.p_a[oa], b.p_a[ob], atol=1e-12)
-            np.testing.assert_allclose(a.p_b[oa], b.p_b[ob], atol=1e-12)
-            ok = np.isfinite(b.normal[ob, 0])
-            np.testing.assert_allclose(a.normal[oa][ok], b.normal[ob][ok], atol=1e-9)
-            compared += a.index.size
-            direct += int(np.isin(a.index, swept._direct_seen).sum())
-            mesh += int(np.isin(a.index, swept._mesh_seen).sum())
+    for swept, plain, q in _limit_poses(rt, demo_cube, 12, rng, (0.1, 0.7)):
+        a, b = swept.query(q), plain.query(q)
+        oa, ob = np.argsort(a.index), np.argsort(b.index)
+        np.testing.assert_array_equal(a.index[oa], b.index[ob])
+        np.testing.assert_allclose(a.distance[oa], b.distance[ob], atol=1e-12)
+        np.testing.assert_allclose(a.p_a[oa], b.p_a[ob], atol=1e-12)
+        np.testing.assert_allclose(a.p_b[oa], b.p_b[ob], atol=1e-12)
+        ok = np.isfinite(b.normal[ob, 0])
+        np.testing.assert_allclose(a.normal[oa][ok], b.normal[ob][ok], atol=1e-9)
+        compared += a.index.size
+        direct += int(np.isin(a.index, swept._direct_seen).sum())
+        mesh += int(np.isin(a.index, swept._mesh_seen).sum())
     assert compared > 50
     assert direct > 0  # the per-pair path inside the sweep limit was compared too
     if name in ("svh", "panda"):
         assert mesh > 0  # and its mesh pairs, candidates from the sweep
+
+
+@pytest.mark.parametrize("name", ["allegro", "panda"])
+def test_broad_phase_keeps_every_pair_within_reach(name, demo_cube):
+    """The per-pair broad phase (bounding spheres, and the separating axis test for box–box
+    pairs) drops only pairs farther than ``distmax``: against ``mj_geomDistance`` on every
+    per-pair pair, random finger poses at the demonstration's wrist poses (Allegro's box
+    links against each other, Panda's boxes against the cube), and it does drop some."""
+    rt = Retargeter(get_hand(name), object_geometry("cube2"))
+    m, d = rt.scene.model, rt.scene.data
+    rng = np.random.default_rng(11)
+    kept = by_boxes = 0
+    for lim, plain, q in _limit_poses(rt, demo_cube, 15, rng, (0.0, 1.0)):
+        d.qpos[: rt.nq] = q
+        mujoco.mj_kinematics(m, d)
+        cand = set(plain.candidates().tolist())
+        for i, (a, b) in enumerate(plain.pairs):
+            if mujoco.mj_geomDistance(m, d, a, b, lim.distmax, None) < lim.distmax:
+                assert i in cand, (m.geom(a).name, m.geom(b).name)
+                kept += 1
+        # Box–box pairs within the spheres' reach that the separating axis test dropped:
+        centre2 = ((d.geom_xpos[plain._sph_a] - d.geom_xpos[plain._sph_b]) ** 2).sum(axis=1)
+        spheres = plain._sph[centre2 < plain._sph_reach2]
+        by_boxes += sum(i not in cand for i in spheres.tolist())
+    assert kept > 0 and by_boxes > 0
 
 
 @pytest.mark.parametrize(("hand_reach", "other_reach"), [(0.01, 0.03), (0.03, 0.01)])

@@ -197,12 +197,54 @@ def rows_and_jacobians(
     return G, out[:, D].copy(), near_pairs
 
 
-@kernel(F2, F2, I1, I1, I1, F1, I1, I1, I1, F1)
-def broad_phase(xpos, xmat, sph, sph_a, sph_b, reach2, pln, pln_a, pln_b, pln_reach):
+@njit(cache=True)
+def _boxes_apart(xpos, xmat, a, b, ea, eb):
+    """Whether boxes ``a`` and ``b`` (half sizes ``ea``, ``eb``; poses from ``xpos`` and the
+    row-major ``xmat``, whose columns are a box's axes) are separated: one of the 15 axes of
+    the separating axis test (the boxes' face normals and the cross products of their edges)
+    has their projections apart. Exact for boxes; a small tolerance keeps touching boxes and
+    parallel edges (a zero cross product) on the overlapping side."""
+    R = np.empty((3, 3))  # Ra^T Rb: b's axes in a's frame
+    absR = np.empty((3, 3))
+    t = np.empty(3)  # b's centre in a's frame
+    for i in range(3):
+        t[i] = 0.0
+        for k in range(3):
+            t[i] += xmat[a, 3 * k + i] * (xpos[b, k] - xpos[a, k])
+        for j in range(3):
+            r = 0.0
+            for k in range(3):
+                r += xmat[a, 3 * k + i] * xmat[b, 3 * k + j]
+            R[i, j] = r
+            absR[i, j] = abs(r) + 1e-9
+    for i in range(3):  # a's face normals
+        if abs(t[i]) > ea[i] + eb[0] * absR[i, 0] + eb[1] * absR[i, 1] + eb[2] * absR[i, 2]:
+            return True
+    for j in range(3):  # b's face normals
+        tj = t[0] * R[0, j] + t[1] * R[1, j] + t[2] * R[2, j]
+        if abs(tj) > ea[0] * absR[0, j] + ea[1] * absR[1, j] + ea[2] * absR[2, j] + eb[j]:
+            return True
+    for i in range(3):  # edge × edge
+        i1, i2 = (i + 1) % 3, (i + 2) % 3
+        for j in range(3):
+            j1, j2 = (j + 1) % 3, (j + 2) % 3
+            ra = ea[i1] * absR[i2, j] + ea[i2] * absR[i1, j]
+            rb = eb[j1] * absR[i, j2] + eb[j2] * absR[i, j1]
+            if abs(t[i2] * R[i1, j] - t[i1] * R[i2, j]) > ra + rb:
+                return True
+    return False
+
+
+@kernel(F2, F2, I1, I1, I1, F1, B1, F2, F2, I1, I1, I1, F1)
+def broad_phase(
+    xpos, xmat, sph, sph_a, sph_b, reach2, boxes, box_a, box_b, pln, pln_a, pln_b, pln_reach
+):  # fmt: skip
     """The per-pair path's candidates (``CollisionLimit.candidates``): the pairs ``sph``
-    whose geoms' centres ``xpos`` are closer than ``√reach2``, then the plane pairs ``pln``
-    whose hand geom's centre is less than ``pln_reach`` above the plane (its frame's z axis
-    from ``xmat``)."""
+    whose geoms' centres ``xpos`` are closer than ``√reach2`` (and, for box–box pairs,
+    ``boxes``, whose first box grown by the query distance (half sizes ``box_a``) meets the
+    second (``box_b``): a box within that distance of another lies in it grown so), then the
+    plane pairs ``pln`` whose hand geom's centre is less than ``pln_reach`` above the plane
+    (its frame's z axis from ``xmat``)."""
     out = np.empty(sph.shape[0] + pln.shape[0], np.int64)
     m = 0
     for i in range(sph.shape[0]):
@@ -210,9 +252,12 @@ def broad_phase(xpos, xmat, sph, sph_a, sph_b, reach2, pln, pln_a, pln_b, pln_re
         dx = xpos[a, 0] - xpos[b, 0]
         dy = xpos[a, 1] - xpos[b, 1]
         dz = xpos[a, 2] - xpos[b, 2]
-        if dx * dx + dy * dy + dz * dz < reach2[i]:
-            out[m] = sph[i]
-            m += 1
+        if dx * dx + dy * dy + dz * dz >= reach2[i]:
+            continue
+        if boxes[i] and _boxes_apart(xpos, xmat, a, b, box_a[i], box_b[i]):
+            continue
+        out[m] = sph[i]
+        m += 1
     for i in range(pln.shape[0]):
         a, b = pln_a[i], pln_b[i]
         h = (xpos[a, 0] - xpos[b, 0]) * xmat[b, 2]

@@ -442,6 +442,13 @@ class CollisionLimit(Limit):
         self._sph_a, self._sph_b = ga[self._sph], gb[self._sph]
         reach = m.geom_rbound[self._sph_a] + m.geom_rbound[self._sph_b] + distmax
         self._sph_reach2 = reach**2
+        # Box–box pairs also take the boxes' separating axis test (Allegro's self pairs: 22
+        # broad-phase candidates per iterate with the spheres, 5 with the boxes, 4.5 within
+        # distmax; built-in demonstrations).
+        box = mujoco.mjtGeom.mjGEOM_BOX
+        self._box = (m.geom_type[self._sph_a] == box) & (m.geom_type[self._sph_b] == box)
+        self._box_a = m.geom_size[self._sph_a] + distmax
+        self._box_b = m.geom_size[self._sph_b].copy()
         # Plane pairs (geom_b a plane, e.g. the table): the hand geom's bounding sphere against
         # the plane's half-space.
         self._pln = pairs[b_plane]
@@ -457,6 +464,7 @@ class CollisionLimit(Limit):
         d = self.data
         return _kernels.broad_phase(
             d.geom_xpos, d.geom_xmat, self._sph, self._sph_a, self._sph_b, self._sph_reach2,
+            self._box, self._box_a, self._box_b,
             self._pln, self._pln_a, self._pln_b, self._pln_reach,
         )  # fmt: skip
 
