@@ -228,6 +228,11 @@ class PinocchioKinematics:
         :meth:`forward`, in MuJoCo site order (shared, read-only: copy to modify)."""
         return self._all_site_jacobians(), self._all_site_positions()
 
+    def site_rotation_array(self) -> np.ndarray:
+        """(nsite, 9) every site's world rotation matrix, row-major, at the last
+        :meth:`forward`, in MuJoCo site order (a view: do not modify)."""
+        return self._mj_data.site_xmat
+
     def _all_site_positions(self) -> np.ndarray:
         """(nsite, 3) [m] every site's world position at the last :meth:`forward` (a view)."""
         return self._mj_data.site_xpos

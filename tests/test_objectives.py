@@ -127,6 +127,35 @@ def test_accumulate_adds_the_qp_terms(kin):
             assert np.abs(H).max() > 0, obj.name
 
 
+def test_wrist_rotation_error_is_the_rotation_vector_up_to_pi():
+    """The wrist objective's compiled rotation error is the rotation vector of ``R R*ᵀ``,
+    angle in [0, π], against SciPy's, at random rotations and at angles near 0 and π (every
+    branch of the quaternion extraction: the trace, and each diagonal element largest)."""
+    from scipy.spatial.transform import Rotation
+
+    from retarget.objectives._kernels import pose_error
+
+    rng = np.random.default_rng(7)
+    axes = rng.normal(size=(60, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    angles = np.concatenate([rng.uniform(0, np.pi, 30), np.pi - 10.0 ** -rng.uniform(3, 9, 15),
+                             10.0 ** -rng.uniform(3, 13, 15)])  # fmt: skip
+    axes[30:33] = np.eye(3)  # near π about each axis: each diagonal branch
+    R_target = Rotation.random(random_state=3).as_matrix()
+    p, p_target = rng.normal(size=3), rng.normal(size=3)
+    for rv in axes * angles[:, None]:
+        R = Rotation.from_rotvec(rv).as_matrix() @ R_target
+        e = np.empty(6)
+        pose_error(p, R.reshape(9), p_target, R_target, e)
+        np.testing.assert_allclose(e[:3], p - p_target, atol=1e-15)
+        want = Rotation.from_matrix(R @ R_target.T).as_rotvec()
+        if np.linalg.norm(want) > np.pi - 1e-6:  # ±axis·π are the same rotation
+            assert abs(np.linalg.norm(e[3:]) - np.pi) < 1e-6
+            np.testing.assert_allclose(np.abs(e[3:]), np.abs(want), atol=1e-6)
+        else:
+            np.testing.assert_allclose(e[3:], want, atol=1e-9, rtol=1e-9)
+
+
 def test_memoised_qp_terms_follow_weight_and_mask_changes(kin):
     """Posture and smoothness memoise their diagonal Hessian; it must track new weights and
     masks, and match the generic ``JᵀWJ, JᵀWe`` of their error and Jacobian."""

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from retarget._jit import BOOL, F1, F1CW, F2, F2C, F2CW, F3, F3C, FLOAT, I1, kernel
+from retarget._jit import BOOL, F1, F1CW, F2, F2C, F2CW, F3, F3C, FLOAT, I1, INT, kernel
 
 
 @njit(cache=True)
@@ -96,3 +96,83 @@ def surface_gram(J, points, targets, frames, idx, split, weight, ramp, tangent_w
                 _add_row(row, wi, e, P, c)
             else:
                 _add_row(J[k, r], wi, d[r], P, c)
+
+
+@njit(cache=True)
+def _rotation_vector(M, out):
+    """``out[:] =`` the rotation vector [rad] (angle in [0, π]) of the rotation matrix ``M``
+    (3, 3): its unit quaternion by the largest-diagonal branch (as ``mju_mat2Quat``, robust
+    near π), taken with ``w ≥ 0``, then ``2 atan2(|v|, w) v / |v|``."""
+    tr = M[0, 0] + M[1, 1] + M[2, 2]
+    if tr > 0.0:
+        s = 2.0 * np.sqrt(tr + 1.0)
+        w, x, y, z = (
+            0.25 * s,
+            (M[2, 1] - M[1, 2]) / s,
+            (M[0, 2] - M[2, 0]) / s,
+            (M[1, 0] - M[0, 1]) / s,
+        )
+    elif M[0, 0] > M[1, 1] and M[0, 0] > M[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + M[0, 0] - M[1, 1] - M[2, 2])
+        w, x, y, z = (
+            (M[2, 1] - M[1, 2]) / s,
+            0.25 * s,
+            (M[0, 1] + M[1, 0]) / s,
+            (M[0, 2] + M[2, 0]) / s,
+        )
+    elif M[1, 1] > M[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + M[1, 1] - M[0, 0] - M[2, 2])
+        w, x, y, z = (
+            (M[0, 2] - M[2, 0]) / s,
+            (M[0, 1] + M[1, 0]) / s,
+            0.25 * s,
+            (M[1, 2] + M[2, 1]) / s,
+        )
+    else:
+        s = 2.0 * np.sqrt(1.0 + M[2, 2] - M[0, 0] - M[1, 1])
+        w, x, y, z = (
+            (M[1, 0] - M[0, 1]) / s,
+            (M[0, 2] + M[2, 0]) / s,
+            (M[1, 2] + M[2, 1]) / s,
+            0.25 * s,
+        )
+    n = np.sqrt(w * w + x * x + y * y + z * z)
+    if w < 0.0:  # the short way round
+        n = -n
+    w, x, y, z = w / n, x / n, y / n, z / n
+    v = np.sqrt(x * x + y * y + z * z)
+    f = 2.0 if v < 1e-12 else 2.0 * np.arctan2(v, w) / v  # (first order: 2 sin(θ/2) ≈ θ)
+    out[0], out[1], out[2] = f * x, f * y, f * z
+
+
+@njit(cache=True)
+def _pose_error(p, R, p_target, R_target, out):
+    M = np.empty((3, 3))
+    for a in range(3):
+        out[a] = p[a] - p_target[a]
+        for b in range(3):
+            M[a, b] = (
+                R[3 * a] * R_target[b, 0]
+                + R[3 * a + 1] * R_target[b, 1]
+                + R[3 * a + 2] * R_target[b, 2]
+            )
+    _rotation_vector(M, out[3:])
+
+
+@kernel(F1, F1, F1, F2, F1CW)
+def pose_error(p, R, p_target, R_target, out):
+    """``out`` (6,) ``= [p − p*; log(R R*ᵀ)]`` for a position ``p`` (3,) and a rotation ``R``
+    (9,), row-major (MuJoCo's ``xmat``), against ``p_target``, ``R_target`` (3, 3)."""
+    _pose_error(p, R, p_target, R_target, out)
+
+
+@kernel(F3C, F2, F2, INT, F1, F2, F1, F2CW, F1CW)
+def pose_gram(J_sites, p_sites, R_sites, site, p_target, R_target, w, P, c):
+    """The wrist pose term of site ``site``: :func:`pose_error` from the kinematics' all-sites
+    positions ``p_sites`` (nsite, 3) and rotations ``R_sites`` (nsite, 9), and the site's
+    Jacobian ``J_sites[site]`` (6, nv) as the error's, rows weighted ``w`` (6,)."""
+    e = np.empty(6)
+    _pose_error(p_sites[site], R_sites[site], p_target, R_target, e)
+    for r in range(6):
+        if w[r] != 0.0:
+            _add_row(J_sites[site, r], w[r], e[r], P, c)

@@ -2,29 +2,13 @@
 
 from __future__ import annotations
 
-import math
-
-import mujoco
 import numpy as np
 
 from retarget.errors import RetargetError
+from retarget.kinematics import PinocchioKinematics
+from retarget.objectives._kernels import pose_error, pose_gram
 from retarget.objectives.base import Objective
 from retarget.state import RobotState
-
-
-def rotation_log(R: np.ndarray) -> np.ndarray:
-    """(3,) rotation vector [rad] of a rotation matrix (angle in [0, π]), via its quaternion
-    (``mju_mat2Quat`` is robust near π, where the matrix formula loses precision)."""
-    quat = np.empty(4)
-    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(R, dtype=np.float64).reshape(9))
-    w, x, y, z = quat.tolist()
-    if w < 0:  # the short way round
-        w, x, y, z = -w, -x, -y, -z
-    s = math.sqrt(x * x + y * y + z * z)
-    if s < 1e-12:
-        return np.array([2.0 * x, 2.0 * y, 2.0 * z])  # first order: 2 sin(θ/2) axis ≈ θ axis
-    f = 2.0 * math.atan2(s, w) / s
-    return np.array([f * x, f * y, f * z])
 
 
 class WristPoseObjective(Objective):
@@ -63,9 +47,21 @@ class WristPoseObjective(Objective):
         return np.broadcast_to(w, (m,))
 
     def error(self, state: RobotState) -> np.ndarray:
-        p = state.kin.site_position(self.site)
-        R = state.kin.site_rotation(self.site)
-        return np.concatenate([p - self.p_target, rotation_log(R @ self.R_target.T)])
+        kin = state.kin
+        e = np.empty(6)
+        R = np.ascontiguousarray(kin.site_rotation(self.site)).reshape(9)
+        pose_error(kin.site_position(self.site), R, self.p_target, self.R_target, e)
+        return e
 
     def jacobian(self, state: RobotState) -> np.ndarray:
         return state.kin.site_jacobian(self.site)
+
+    def accumulate(self, state: RobotState, P: np.ndarray, c: np.ndarray) -> None:
+        """One compiled pass from the kinematics' all-sites arrays (:func:`pose_gram`: the
+        error, its rotation vector included, and ``JᵀWJ``); the base class's otherwise."""
+        kin = state.kin
+        if not isinstance(kin, PinocchioKinematics):
+            return super().accumulate(state, P, c)
+        J, p = kin.site_arrays()
+        pose_gram(J, p, kin.site_rotation_array(), int(kin.site_rows((self.site,))[0]),
+                  self.p_target, self.R_target, self._weight_vector(6), P, c)  # fmt: skip
