@@ -638,6 +638,10 @@ class Retargeter:
             if self.cfg.use_collision:
                 self.collision = self.distance_query
                 self.limits.append(self.collision)
+        if self.contacts is not None:
+            # The iterate's contact points read the sweep's configuration (no second
+            # mj_kinematics on the scene), other configurations a posed copy.
+            self.contacts.kinematics = self.sweep.kinematics
         self._pair_parts = None  # (pairs, F·3): which finger part each hand-object pair's geom is
         if self.distance_query is not None and self.contacts is not None:
             F = len(self.contacts.part_geoms)

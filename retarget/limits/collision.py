@@ -264,6 +264,18 @@ class ContactSweep:
         self._posed_key = key
         return _pose(self.model, self._posed, d, q, self.hand_nq)
 
+    def kinematics(self, q: np.ndarray) -> mujoco.MjData:
+        """An ``MjData`` with the scene's kinematics at hand configuration ``q`` (and the
+        current mocap poses), for reading geom poses: the sweep's own data when its last sweep
+        is at ``q`` and nothing moved it since (no ``mj_kinematics`` then: the iterate's
+        contact objective reads the sweep's configuration), else :meth:`posed`'s."""
+        q = np.asarray(q, dtype=np.float64)
+        d = self.data
+        key = q.tobytes() + d.mocap_pos.tobytes() + d.mocap_quat.tobytes()
+        if key == self._key and d.qpos[: self.hand_nq].tobytes() == key[: q.nbytes]:
+            return d
+        return self.posed(q)
+
     def invalidate(self) -> None:
         """Forget the cached contacts and pose (after changing the scene other than
         ``q``/mocap)."""
