@@ -122,12 +122,15 @@ def row_setup(index, rows, n_first, geom_xpos, ga, pair_margins, max_recovery, h
     spheres and capsules; a row without any direction is dropped. ``h = d + margin``, at least
     ``−max_recovery`` (NaN: no cap), at least 0 with ``hold_only``. ``near_pairs``: the pairs
     among the first ``n_first`` rows (each pair's closest points) within ``near`` [m] of their
-    allowed distance (0, or the clearance where the margin is negative).
+    allowed distance (0, or the clearance where the margin is negative); ``near_rows``: each
+    one's row in ``out`` (−1: dropped), ``near_slack``: its ``d + margin`` [m] (uncapped).
     """
     k = index.shape[0]
     keep = np.empty(k, np.int64)
     out = np.empty((k, WIDTH))
     near_pairs = np.empty(n_first, np.int64)
+    near_rows = np.empty(n_first, np.int64)
+    near_slack = np.empty(n_first)
     nn = m = 0
     for r in range(k):
         i = index[r]
@@ -135,6 +138,8 @@ def row_setup(index, rows, n_first, geom_xpos, ga, pair_margins, max_recovery, h
         d = rows[r, D]
         if r < n_first and d + min(pm, 0.0) < near:
             near_pairs[nn] = i
+            near_rows[nn] = m
+            near_slack[nn] = d + pm
             nn += 1
         out[m] = rows[r]
         if not np.isfinite(rows[r, N]):
@@ -143,6 +148,8 @@ def row_setup(index, rows, n_first, geom_xpos, ga, pair_margins, max_recovery, h
             c2 = rows[r, PB + 2] - geom_xpos[ga[i], 2]
             cn = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
             if cn < 1e-12:
+                if r < n_first and nn > 0 and near_pairs[nn - 1] == i:
+                    near_rows[nn - 1] = -1
                 continue
             out[m, N] = c0 / cn
             out[m, N + 1] = c1 / cn
@@ -155,7 +162,10 @@ def row_setup(index, rows, n_first, geom_xpos, ga, pair_margins, max_recovery, h
         out[m, D] = h
         keep[m] = i
         m += 1
-    return keep[:m].copy(), out[:m].copy(), near_pairs[:nn].copy()
+    return (
+        keep[:m].copy(), out[:m].copy(), near_pairs[:nn].copy(), near_rows[:nn].copy(),
+        near_slack[:nn].copy(),
+    )  # fmt: skip
 
 
 @njit(cache=True)
@@ -186,15 +196,34 @@ def rows_and_jacobians(
 ):  # fmt: skip
     """:func:`row_setup` and the rows ``G = nᵀ (J_a − J_b)`` (``J_b`` only for
     ``self_collision``) from a world-frame joint Jacobian and per-pair body dof masks:
-    ``(G, h, near_pairs)``."""
-    keep, out, near_pairs = row_setup(
+    ``(G, h, near_pairs, near_rows, near_slack)``."""
+    keep, out, near_pairs, near_rows, near_slack = row_setup(
         index, rows, n_first, geom_xpos, ga, pair_margins, max_recovery, hold_only, near
     )
     G = np.zeros((keep.shape[0], J.shape[1]))
     _add_normal_jacobians(J, masks_a, keep, out, PA, 1.0, G)
     if self_collision:
         _add_normal_jacobians(J, masks_b, keep, out, PB, -1.0, G)
-    return G, out[:, D].copy(), near_pairs
+    return G, out[:, D].copy(), near_pairs, near_rows, near_slack
+
+
+@kernel(F2, I1, F1, F1, FLOAT)
+def check_after_step(G, near_rows, near_slack, dq, after):
+    """Which near pairs the end-of-step check measures: those the linear rows predict within
+    ``after`` [m] of their allowed distance after the step ``dq`` (``near_slack − G_r·dq``,
+    ``G_r`` the pair's row ``near_rows`` in ``G``), and those without a row (−1)."""
+    k = near_rows.shape[0]
+    out = np.empty(k, np.bool_)
+    for j in range(k):
+        r = near_rows[j]
+        if r < 0:
+            out[j] = True
+            continue
+        s = near_slack[j]
+        for a in range(dq.shape[0]):
+            s -= G[r, a] * dq[a]
+        out[j] = s < after
+    return out
 
 
 @njit(cache=True)
