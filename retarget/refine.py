@@ -70,7 +70,11 @@ class RefineConfig:
     instead of 12 s (README, force preservation). With ``finger_close_m`` (2026-12-04, the
     five-finger hands and LEAP, ``--variants e`` on the cached human simulations), 2 → 4
     retries: five-finger (e) strict success 83.0 → 87.5 %, LEAP 78.6 → 82.1 %, CPU per
-    refinement 14.8 → 24.2 s on average (13.4 → 39.1 s on those that still fail); so 4."""
+    refinement 14.8 → 24.2 s on average (13.4 → 39.1 s on those that still fail); so 4.
+    6 retries (2026-12-06, five-finger hands, the same runs): 2 of the 8 that failed at 4
+    rescued (92.6 → 94.4 %; paired heavy / light 86.1 / 100 → 88.9 / 100 %), CPU per
+    refinement 23.8 → 40.8 s on average (40.0 → 130.9 s on the 6 that still fail, their last
+    attempts losing the object at frames 305–397 as at 4); kept at 4."""
     finger_close_m: float = 0.04
     """Each finger's action also moves its fingertip this far [m] towards the object's origin
     (its frame's; the centre of a primitive) at ``u_f = 1`` (away at ``−1``; first order,
