@@ -35,6 +35,7 @@ F1CW, F2CW, F3CW = (_array(nt.float64, n, writable=True, layout="C") for n in (1
 I1 = _array(nt.int64, 1)
 I2_32 = _array(nt.int32, 2)
 B1 = _array(nt.boolean, 1)
+B2 = _array(nt.boolean, 2)
 INT, FLOAT, BOOL = nt.int64, nt.float64, nt.boolean
 
 

@@ -40,6 +40,7 @@ import numpy as np
 from dexcanvas_core.keypoints import MANO21
 from dexcanvas_core.rotations import aa_to_matrix, aa_to_quat_wxyz
 from dexcanvas_core.trajectory import Trajectory
+from retarget._kernels import predicted_start
 from retarget.errors import RetargetError
 from retarget.hands.base import WRIST_SITE, wrist_qpos_from_mano
 from retarget.kinematics import MujocoKinematics, PinocchioKinematics
@@ -1333,23 +1334,16 @@ class Retargeter:
         wrist moves as the human's did, the fingers at their last velocity unless a contact
         switched in the last two frames (its jump is no velocity to go on with). A prediction
         deeper in the object than the margins falls back to the last solution (more than one
-        step may be needed to undo it: the example cube2/tripod, Shadow, 17 mm deep)."""
-        q = Q_last[1]
-        q0 = q.copy()
-        dw = wq[1] - wq[0]
-        dw[3:] = (dw[3:] + np.pi) % (2 * np.pi) - np.pi  # Euler angles wrap
-        q0[:6] += dw
-        if (active[t] == active[t - 1]).all() and (active[t - 1] == active[t - 2]).all():
-            q0[6:] += q[6:] - Q_last[0, 6:]
-        q0 = self._within_limits(q0, solver=True)
-        return q if self._too_deep(q0) else q0
+        step may be needed to undo it: the example cube2/tripod, Shadow, 17 mm deep). The
+        prediction is clipped to the solver's joint ranges (inside the servos' by
+        ``joint_limit_margin``)."""
+        q0 = predicted_start(Q_last, wq, active, t, self._solve_lower, self._solve_upper)
+        return Q_last[1] if self._too_deep(q0) else q0
 
-    def _within_limits(self, q: np.ndarray, solver: bool = False) -> np.ndarray:
-        """``q`` clipped to the joint ranges (``solver``: the kinematic solution's, inside
-        them by ``joint_limit_margin``; else the servo commands' whole ranges). ``np.clip``
-        costs 2.3× as much on 30 dofs: 3.2 against 1.4 µs."""
-        lo, hi = (self._solve_lower, self._solve_upper) if solver else (self.lower, self.upper)
-        return np.minimum(np.maximum(q, lo), hi)
+    def _within_limits(self, q: np.ndarray) -> np.ndarray:
+        """``q`` clipped to the servo commands' joint ranges (``np.clip`` costs 2.3× as much on
+        30 dofs: 3.2 against 1.4 µs)."""
+        return np.minimum(np.maximum(q, self.lower), self.upper)
 
     def _too_deep(self, q: np.ndarray) -> bool:
         """Whether ``q`` is deeper than a collision limit's margin + 0.5 mm anywhere (one

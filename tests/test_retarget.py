@@ -754,6 +754,36 @@ def test_force_matching_takes_its_own_contact_tangent_weight():
                 RetargetConfig(**{k: v}).validate()
 
 
+def test_predicted_start_moves_the_wrist_as_the_human_and_the_fingers_at_their_velocity():
+    """``predicted_start`` (the warm start's prediction): the wrist by the human's step, its
+    Euler angles wrapped across ±π; the fingers by their last step only while no contact flag
+    changed over the last two frames; all clipped to the ranges."""
+    from retarget._kernels import predicted_start
+
+    rng = np.random.default_rng(5)
+    n = 12
+    lower, upper = -np.full(n, 1.0), np.full(n, 1.0)
+    lower[:3], upper[:3] = -np.inf, np.inf  # the wrist position is unbounded
+    for case in range(40):
+        Q = rng.uniform(-0.9, 0.9, size=(2, n))
+        wq = rng.uniform(-0.5, 0.5, size=(2, 6))
+        if case % 4 == 0:  # an Euler angle crossing ±π
+            wq[0, 4], wq[1, 4] = np.pi - 0.01, -np.pi + 0.02
+        active = rng.random((5, 4)) < 0.5
+        if case % 2:
+            active[1:4] = active[2]  # no flag changed over frames 1–3
+        q0 = predicted_start(Q, wq, active, 3, lower, upper)
+        step = wq[1] - wq[0]
+        step[3:] = np.angle(np.exp(1j * step[3:]))  # the same angle in (−π, π]
+        want = Q[1].copy()
+        want[:6] += step
+        if case % 2:
+            want[6:] += Q[1, 6:] - Q[0, 6:]
+        np.testing.assert_allclose(q0, np.clip(want, lower, upper), atol=1e-12)
+        if case % 4 == 0:  # a 0.03 rad step, not −2π + 0.03
+            assert q0[4] == pytest.approx(min(Q[1, 4] + 0.03, upper[4]), abs=1e-12)
+
+
 def test_predicted_warm_start_takes_fewer_steps_without_overshooting():
     """Frames start from a prediction (wrist moved as the human's, fingers at their last
     velocity): fewer QP solves per frame, the same keypoint error, and no faster wrist at a

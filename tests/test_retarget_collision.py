@@ -563,8 +563,8 @@ def test_end_of_step_check_skips_only_pairs_predicted_clear(demo_cube, hand_name
             skipped = 0
             if pred is not None and lim._near.size:
                 q_lin, G, rows, slack = pred
-                ask = _kernels.check_after_step(G, rows, slack, q - q_lin, lim.NEAR_AFTER)
-                skipped = int((~ask).sum())
+                ask = _kernels.check_after_step(G, rows, slack, lim._near, q, q_lin, lim.NEAR_AFTER)
+                skipped = lim._near.size - ask.size
             lim._near_pred = None  # every near pair
             full = check(q)
             lim._near_pred = pred

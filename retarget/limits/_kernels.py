@@ -207,23 +207,26 @@ def rows_and_jacobians(
     return G, out[:, D].copy(), near_pairs, near_rows, near_slack
 
 
-@kernel(F2, I1, F1, F1, FLOAT)
-def check_after_step(G, near_rows, near_slack, dq, after):
-    """Which near pairs the end-of-step check measures: those the linear rows predict within
-    ``after`` [m] of their allowed distance after the step ``dq`` (``near_slack − G_r·dq``,
-    ``G_r`` the pair's row ``near_rows`` in ``G``), and those without a row (−1)."""
+@kernel(F2, I1, F1, I1, F1, F1, FLOAT)
+def check_after_step(G, near_rows, near_slack, near_pairs, q, q_lin, after):
+    """The near pairs (``near_pairs``) the end-of-step check measures at ``q``: those the
+    linear rows predict within ``after`` [m] of their allowed distance after the step from
+    ``q_lin`` (``near_slack − G_r·(q − q_lin)``, ``G_r`` the pair's row ``near_rows`` in
+    ``G``), and those without a row (−1)."""
     k = near_rows.shape[0]
-    out = np.empty(k, np.bool_)
+    out = np.empty(k, np.int64)
+    n = 0
     for j in range(k):
         r = near_rows[j]
-        if r < 0:
-            out[j] = True
-            continue
-        s = near_slack[j]
-        for a in range(dq.shape[0]):
-            s -= G[r, a] * dq[a]
-        out[j] = s < after
-    return out
+        if r >= 0:
+            s = near_slack[j]
+            for a in range(q.shape[0]):
+                s -= G[r, a] * (q[a] - q_lin[a])
+            if s >= after:
+                continue
+        out[n] = near_pairs[j]
+        n += 1
+    return out[:n].copy()
 
 
 @njit(cache=True)

@@ -632,8 +632,8 @@ class CollisionLimit(Limit):
             return np.inf
         if self._near_pred is not None:
             q_lin, G, rows, slack = self._near_pred
-            dq = np.asarray(q, dtype=np.float64) - q_lin
-            near = near[_kernels.check_after_step(G, rows, slack, dq, self.NEAR_AFTER)]
+            q = np.asarray(q, dtype=np.float64)
+            near = _kernels.check_after_step(G, rows, slack, near, q, q_lin, self.NEAR_AFTER)
             if not near.size:
                 return np.inf
         m = self.model
