@@ -229,6 +229,36 @@ def check_after_step(G, near_rows, near_slack, near_pairs, q, q_lin, after):
     return out[:n].copy()
 
 
+@kernel(F1, F1, F1)
+def joint_box(q, lower, upper):
+    """``JointLimit``'s step bounds ``(−max(q − lower, 0), max(upper − q, 0))`` (∓inf
+    ranges: unbounded; a start outside the range may step back, not further out)."""
+    n = q.shape[0]
+    lo, hi = np.empty(n), np.empty(n)
+    for i in range(n):
+        lo[i] = -max(q[i] - lower[i], 0.0)
+        hi[i] = max(upper[i] - q[i], 0.0)
+    return lo, hi
+
+
+@kernel(F1, F1, F1, FLOAT)
+def band_box(q, q_prev, v_max, dt):
+    """``FrameSpeedLimit``'s step bounds: ``q + Δq`` within ``v_max · dt`` of ``q_prev`` and
+    ``Δq = 0`` always admitted; at ``dt = 0`` the finite bands are 0 (``inf · 0`` would be
+    NaN)."""
+    n = q.shape[0]
+    lo, hi = np.empty(n), np.empty(n)
+    for i in range(n):
+        if dt > 0:
+            band = v_max[i] * dt
+        else:
+            band = 0.0 if np.isfinite(v_max[i]) else np.inf
+        off = q_prev[i] - q[i]
+        lo[i] = min(off - band, 0.0)
+        hi[i] = max(off + band, 0.0)
+    return lo, hi
+
+
 @njit(cache=True)
 def _boxes_apart(xpos, xmat, a, b, ea, eb):
     """Whether boxes ``a`` and ``b`` (half sizes ``ea``, ``eb``; poses from ``xpos`` and the

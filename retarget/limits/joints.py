@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from retarget.errors import RetargetError
+from retarget.limits._kernels import band_box, joint_box
 from retarget.limits.base import Limit
 from retarget.state import RobotState
 
@@ -22,11 +23,10 @@ class JointLimit(Limit):
         )
 
     def bounds(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
-        # Unlimited joints get ∓inf (their range read as ∓inf: max(inf − q, 0) = inf).
+        # Unlimited joints get ∓inf (their range read as ∓inf: max(inf − q, 0) = inf), and a
+        # start slightly outside the range still gives a feasible QP (_kernels.joint_box).
         lo, hi = self._ranges()
-        q = state.q
-        # Clip so that a start slightly outside the range still gives a feasible QP.
-        return -np.maximum(q - lo, 0.0), np.maximum(hi - q, 0.0)
+        return joint_box(np.asarray(state.q, dtype=np.float64), lo, hi)
 
     def _ranges(self) -> tuple[np.ndarray, np.ndarray]:
         """``(lower, upper)`` with ∓inf for unlimited joints, memoised on the attributes."""
@@ -45,14 +45,25 @@ class VelocityLimit(Limit):
 
     def __init__(self, v_max: np.ndarray | float):
         self.v_max = v_max
+        self._memo_key: tuple | None = None  # (nv, dt, v_max) of a scalar v_max's bounds
+        self._memo: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
 
     def bounds(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         v_max = self.v_max
-        if isinstance(v_max, (int, float)) or np.ndim(v_max) == 0:
+        scalar = isinstance(v_max, (int, float)) or np.ndim(v_max) == 0
+        key = (state.nv, state.dt, float(v_max)) if scalar else None
+        if key is not None and key == self._memo_key:
+            return self._memo  # (read-only arrays: build_qp never writes them)
+        if scalar:
             v = np.full(state.nv, float(v_max) * state.dt)
         else:
             v = np.broadcast_to(np.asarray(v_max, dtype=np.float64), (state.nv,)) * state.dt
-        return -v, v
+        box = (-v, v)
+        if key is not None:
+            for x in box:
+                x.flags.writeable = False
+            self._memo_key, self._memo = key, box
+        return box
 
 
 class FrameSpeedLimit(Limit):
@@ -77,11 +88,6 @@ class FrameSpeedLimit(Limit):
             )
 
     def bounds(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
-        off = self.q_prev - state.q
-        # Unbounded joints: band inf, bounds ∓inf (at dt = 0 the finite bands are 0, inf · 0
-        # would be NaN).
-        if state.dt > 0:
-            band = self.v_max * state.dt
-        else:
-            band = np.where(np.isfinite(self.v_max), 0.0, np.inf)
-        return np.minimum(off - band, 0.0), np.maximum(off + band, 0.0)
+        # Unbounded joints: band inf, bounds ∓inf (_kernels.band_box).
+        q = np.asarray(state.q, dtype=np.float64)
+        return band_box(q, self.q_prev, self.v_max, float(state.dt))
