@@ -679,7 +679,8 @@ class Retargeter:
             if self.cfg.use_self_collision:
                 self.self_collision = self.self_distance_query
                 self.limits.append(self.self_collision)
-        self._velocity: VelocityLimit | None = None  # the iterates' velocity limit (_solve_frame)
+        # The iterates' velocity limit (_solve_frame; one object, which memoises its box).
+        self._velocity = VelocityLimit(c.max_joint_speed)
         self._mink = None
         if self.cfg.backend == "mink":
             self._mink = _MinkSolver(self)
@@ -1269,10 +1270,7 @@ class Retargeter:
             frame = [FrameSpeedLimit(q_prev, self._wrist_speed)]
         if self._mink is not None:
             return self._mink.solve(q, iterations, frame, dt)
-        vel = self._velocity
-        if vel is None or vel.v_max is not self.cfg.max_joint_speed:
-            vel = self._velocity = VelocityLimit(self.cfg.max_joint_speed)  # (memoises its box)
-        limits = [*self.limits, vel, *frame] if t > 0 else self.limits
+        limits = [*self.limits, self._velocity, *frame] if t > 0 else self.limits
         objectives = self._objectives()
         extra = self.cfg.max_feasibility_iterations
         i = fixes = 0

@@ -559,15 +559,14 @@ def test_end_of_step_check_skips_only_pairs_predicted_clear(demo_cube, hand_name
 
         def wrapped(q, lim=lim, check=lim.near_violation):
             got = check(q)
-            pred = lim._near_pred
             skipped = 0
-            if pred is not None and lim._near.size:
-                q_lin, G, rows, slack = pred
+            if lim._near.size:
+                q_lin, G, rows, slack = lim._near_pred
                 ask = _kernels.check_after_step(G, rows, slack, lim._near, q, q_lin, lim.NEAR_AFTER)
                 skipped = lim._near.size - ask.size
-            lim._near_pred = None  # every near pair
+            lim.NEAR_AFTER = np.inf  # every near pair
             full = check(q)
-            lim._near_pred = pred
+            del lim.NEAR_AFTER
             seen.append((got, full, skipped))
             return got
 
