@@ -79,30 +79,47 @@ def sweep_select(geom, dist, pos, frame, lut, ngeom, ga):
     return ps[:k].copy(), closest, rows
 
 
-@kernel(I1, B1, F2, I1, I1, FLOAT)
-def limit_select(pair, closest, rows, swept_map, every_map, distmax):
-    """One limit's rows from a sweep (:func:`sweep_select`'s output), in sweep order:
-    ``(index, rows, n_first)``, first the closest contacts of its swept pairs within
-    ``distmax`` (``n_first`` of them), then every other contact within ``distmax`` of its pairs
-    (further contacts of the swept pairs, all contacts of its per-pair ones).
+@njit(cache=True, inline="always")
+def far_from(i, pair_margins, far):
+    """The distance [m] from which pair ``i``'s closest contact in the sweep stands for its
+    distance: ``far`` beyond its allowed distance (0, or its clearance where its margin is
+    negative); ``inf`` for ``i < 0``."""
+    if i < 0:
+        return np.inf
+    return max(-pair_margins[i], 0.0) + far
 
-    ``swept_map`` / ``every_map``: per registered pair, the limit's pair index (−1: not the
-    limit's) among its swept pairs / among its swept and per-pair ones.
+
+@kernel(I1, B1, F2, I1, I1, I1, F1, FLOAT, FLOAT)
+def limit_select(pair, closest, rows, swept_map, every_map, far_map, pair_margins, far, distmax):
+    """One limit's rows from a sweep (:func:`sweep_select`'s output), in sweep order:
+    ``(index, rows, n_first)``, first the closest contacts within ``distmax`` of its swept
+    pairs and of its ``far_map`` pairs whose closest contact is at least ``far`` beyond their
+    allowed distance (:func:`far_from`; ``n_first`` of them), then every other contact within
+    ``distmax`` of its pairs (further contacts of those, all contacts of its other per-pair
+    ones).
+
+    ``swept_map`` / ``every_map`` / ``far_map``: per registered pair, the limit's pair index
+    (−1: not the limit's) among its swept pairs / among its swept and per-pair ones / among
+    the per-pair ones whose closest contact may stand for their distance when far.
     """
     n = pair.shape[0]
     order = np.empty(n, np.int64)
     index = np.empty(n, np.int64)
+    first = np.zeros(n, np.bool_)
     m = 0
     for j in range(n):  # the closest contacts first
-        s = swept_map[pair[j]]
-        if s >= 0 and closest[j] and rows[j, D] < distmax:
-            order[m] = j
-            index[m] = s
-            m += 1
+        p = pair[j]
+        d = rows[j, D]
+        if closest[j] and d < distmax and every_map[p] >= 0:
+            if swept_map[p] >= 0 or d >= far_from(far_map[p], pair_margins, far):
+                order[m] = j
+                index[m] = every_map[p]
+                first[j] = True
+                m += 1
     n_first = m
     for j in range(n):
         e = every_map[pair[j]]
-        if e >= 0 and not (closest[j] and swept_map[pair[j]] >= 0) and rows[j, D] < distmax:
+        if e >= 0 and not first[j] and rows[j, D] < distmax:
             order[m] = j
             index[m] = e
             m += 1
@@ -331,11 +348,13 @@ def broad_phase(
     return out[:m].copy()
 
 
-@kernel(I1, I1, I1)
-def seen_candidates(pair, seen_map, extra):
+@kernel(I1, B1, F2, I1, F1, FLOAT, I1)
+def seen_candidates(pair, closest, rows, seen_map, pair_margins, far, extra):
     """The per-pair path's candidates, ascending: the pairs ``seen_map`` maps a reported
-    contact's registered pair to (``pair``: :func:`sweep_select`'s registered pair indices;
-    −1: not one of them) and the pairs ``extra`` (the broad phase's)."""
+    contact's registered pair to (``pair``, ``closest``, ``rows``: :func:`sweep_select`'s
+    output; −1: not one of them) whose closest contact is nearer than :func:`far_from`
+    (:func:`limit_select` takes the others from the sweep), and the pairs ``extra`` (the
+    broad phase's)."""
     n = 0
     for j in range(pair.shape[0]):
         n = max(n, seen_map[pair[j]] + 1)
@@ -344,7 +363,7 @@ def seen_candidates(pair, seen_map, extra):
     mark = np.zeros(n, np.bool_)
     for j in range(pair.shape[0]):
         s = seen_map[pair[j]]
-        if s >= 0:
+        if s >= 0 and closest[j] and rows[j, D] < far_from(s, pair_margins, far):
             mark[s] = True
     for i in range(extra.shape[0]):
         mark[extra[i]] = True
