@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from retarget._jit import B2, F1, F2, INT, kernel
+from retarget._jit import B2, BOOL, F1, F2, F2W, FLOAT, INT, kernel
 
 
 @kernel(F2, F2, B2, INT, F1, F1)
@@ -34,3 +34,44 @@ def predicted_start(Q_last, wq, active, t, lower, upper):
     for i in range(n):
         q0[i] = min(max(q0[i], lower[i]), upper[i])
     return q0
+
+
+@kernel(F2W)
+def symmetrize(P):
+    """``P ← ½ (P + Pᵀ)`` in place (the same values as the NumPy expression, without its two
+    temporaries)."""
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(i + 1, n):
+            s = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = s
+            P[j, i] = s
+
+
+@kernel(F2, F1, F2, F1, F1, F1, BOOL, FLOAT)
+def daqp_arrays(G, h, A, b, lb, ub, box, big):
+    """DAQP's constraint arrays in one pass: ``(M, upper, lower, sense)`` with the box
+    ``lb ≤ Δq ≤ ub`` as its first ``nv`` simple bounds when ``box`` (clipped to ``±big``,
+    DAQP's "no bound"), then ``G Δq ≤ h``, then ``A Δq = b`` (sense 5: active and immutable);
+    ``M`` the C-contiguous stack of ``G`` and ``A``."""
+    nv = G.shape[1]
+    mi, me = G.shape[0], A.shape[0]
+    ms = nv if box else 0
+    n = ms + mi + me
+    M = np.empty((mi + me, nv))
+    upper = np.empty(n)
+    lower = np.empty(n)
+    sense = np.zeros(n, np.int32)
+    for i in range(ms):
+        upper[i] = min(ub[i], big)
+        lower[i] = max(lb[i], -big)
+    for r in range(mi):
+        M[r] = G[r]
+        upper[ms + r] = h[r]
+        lower[ms + r] = -big
+    for r in range(me):
+        M[mi + r] = A[r]
+        upper[ms + mi + r] = b[r]
+        lower[ms + mi + r] = b[r]
+        sense[ms + mi + r] = 5
+    return M, upper, lower, sense

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from retarget import _kernels
 from retarget.errors import RetargetError
 from retarget.limits.base import Limit
 from retarget.objectives.base import Objective
@@ -92,8 +93,9 @@ def build_qp(
             if A.shape[0]:
                 As.append(A)
                 bs.append(b)
+    _kernels.symmetrize(P)  # (½ (P + Pᵀ) in place)
     return QPProblem(
-        P=0.5 * (P + P.T),
+        P=P,
         q=c,
         G=np.concatenate(Gs) if len(Gs) > 2 else Gs[-1],
         h=np.concatenate(hs) if len(hs) > 2 else hs[-1],
@@ -105,6 +107,15 @@ def build_qp(
 
 
 _DAQP_INF = 1e30  # DAQP's "no bound"
+_NONE = (np.zeros(0), np.zeros(0))  # (no box: daqp_arrays reads no bounds)
+
+
+def _bound(x: np.ndarray | None, default: float, nv: int) -> np.ndarray:
+    """A box side as ``(nv,)`` float64 (``default`` where ``None``)."""
+    if x is None:
+        return np.full(nv, default)
+    x = np.asarray(x, dtype=np.float64)
+    return x if x.shape == (nv,) else np.broadcast_to(x, (nv,))
 
 
 def _solve_daqp(problem: QPProblem) -> np.ndarray | None:
@@ -114,23 +125,12 @@ def _solve_daqp(problem: QPProblem) -> np.ndarray | None:
     except ImportError:
         raise RetargetError("QP solver 'daqp' is not installed (pip install daqp)") from None
     nv = problem.q.shape[0]
-    mi, me = problem.G.shape[0], problem.A.shape[0]
-    ms = nv if problem.lb is not None or problem.ub is not None else 0
-    upper = np.empty(ms + mi + me)
-    lower = np.full(ms + mi + me, -_DAQP_INF)
-    if ms:
-        upper[:ms] = _DAQP_INF if problem.ub is None else np.minimum(problem.ub, _DAQP_INF)
-        if problem.lb is not None:
-            lower[:ms] = np.maximum(problem.lb, -_DAQP_INF)
-    upper[ms : ms + mi] = problem.h
-    upper[ms + mi :] = problem.b
-    lower[ms + mi :] = problem.b
-    sense = np.zeros(ms + mi + me, dtype=np.intc)
-    sense[ms + mi :] = 5  # equality (active and immutable)
-    A = problem.G if not me else (problem.A if not mi else np.vstack([problem.G, problem.A]))
-    x, _, exitflag, _ = daqp.solve(
-        problem.P, problem.q, np.ascontiguousarray(A), upper, lower, sense
+    box = problem.lb is not None or problem.ub is not None
+    lb, ub = (_bound(problem.lb, -np.inf, nv), _bound(problem.ub, np.inf, nv)) if box else _NONE
+    M, upper, lower, sense = _kernels.daqp_arrays(
+        problem.G, problem.h, problem.A, problem.b, lb, ub, box, _DAQP_INF
     )
+    x, _, exitflag, _ = daqp.solve(problem.P, problem.q, M, upper, lower, sense)
     return x if exitflag > 0 else None
 
 
