@@ -1161,12 +1161,11 @@ class Retargeter:
             if not idle.any():
                 return np.zeros(self.nq)
         self.kin.forward(q)
-        pts = self.contacts.finger_points(q)
         idx = np.flatnonzero(active | idle)
         pressed = active[idx]
         fingers = np.isfinite(fm["kp"])
-        P = self.contacts.finger_point_array(q)[idx]
-        Jall = self.kin.point_jacobians(tuple(pts[i][0] for i in idx), P)[:, :, : self.nq]
+        bodies, P, gap = self.contacts.nearest_of(q, idx)
+        Jall = self.kin.point_jacobians(bodies, P)[:, :, : self.nq]
         # Over the servoed joints, each carrying the joints its linkage drives (a coupled
         # distal joint moves with its servo, and its share of the load is the servo's: τ =
         # (J C)ᵀ f); the wrist has no column (it does not squeeze).
@@ -1201,7 +1200,6 @@ class Retargeter:
         # both solves them jointly through the joints they share (Shadow's WRJ0/1, SVH's
         # spread), which the force benchmark's (d) measured worse (five-finger correlation on
         # the same 61 successful runs 0.739 → 0.732, SVH cube2/sliding 0.83 → 0.63).
-        gap = self.contacts.finger_distances(q)[idx]
         target = np.where(pressed, 0.0, self.cfg.idle_contact_clearance or 0.0)
         for group in (pressed, ~pressed & (gap < target)):
             err = (gap - target)[group]
@@ -1236,11 +1234,10 @@ class Retargeter:
         if self.contacts is None or self.cfg.squeeze_depth <= 0 or not active.any():
             return dq
         self.kin.forward(q)
-        pts = self.contacts.finger_points(q)
         idx = np.flatnonzero(active)
-        J = self.kin.point_jacobians(
-            tuple(pts[i][0] for i in idx), self.contacts.finger_point_array(q)[idx]
-        )[:, :, : self.nq].reshape(-1, self.nq)
+        bodies, P, _ = self.contacts.nearest_of(q, idx)
+        J = self.kin.point_jacobians(bodies, P)[:, :, : self.nq]
+        J = J.reshape(-1, self.nq)
         C = self._servo_follower_map(q)  # the servos move; coupled joints follow them
         delta = np.concatenate([-self.cfg.squeeze_depth * normals[i] for i in idx])
         dq = C @ _damped_step(J @ C, delta)

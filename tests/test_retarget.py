@@ -256,6 +256,37 @@ def test_surface_contact_tangent_weight_scales_only_the_tangential_pull(demo):
         rt.contacts.set_contacts(active, tg["contact_points"][t], normals=n[:2])
 
 
+def test_nearest_of_computes_only_the_asked_fingers(demo, monkeypatch):
+    """The grip squeeze's ``nearest_of`` gives the asked fingers' entries of ``finger_points``
+    and ``finger_distances`` (same bodies, points and distances), querying only their links."""
+    import mujoco
+
+    rt = Retargeter(get_hand("shadow"), object_geometry("cube2"))
+    tg = rt.human_targets(demo)
+    t = int(np.flatnonzero(tg["contact_active"].sum(axis=1) >= 2)[0])
+    rt.scene.set_object_pose(demo.object.pos[t], demo.object.rot_aa[t])
+    F = len(rt.tip_sites)
+    rt.contacts.set_contacts(np.ones(F, bool), tg["contact_points"][t], np.zeros(F, int))
+    q = rt.q_default.copy()
+    q[:6] = [*tg["wrist_p"][t], 0.1, -0.2, 0.3]
+    idx = np.array([3, 0])
+    calls = []
+    geom_distance = mujoco.mj_geomDistance
+    monkeypatch.setattr(
+        mujoco,
+        "mj_geomDistance",
+        lambda m, d, a, b, *r: calls.append(a) or geom_distance(m, d, a, b, *r),
+    )
+    bodies, P, gap = rt.contacts.nearest_of(q, idx)
+    asked = {g for i in idx for g in rt.contacts.part_geoms[i][0]}
+    assert calls and set(calls) <= asked
+    monkeypatch.undo()
+    pts, dist = rt.contacts.finger_points(q), rt.contacts.finger_distances(q)
+    assert bodies == tuple(pts[i][0] for i in idx)
+    np.testing.assert_array_equal(P, np.array([pts[i][1] for i in idx]))
+    np.testing.assert_array_equal(gap, dist[idx])
+
+
 def test_contact_error_per_finger_and_shape_errors():
     from retarget.run import contact_error_per_finger
 

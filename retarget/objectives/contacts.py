@@ -214,6 +214,17 @@ class SurfaceContactObjective(Objective):
         self._nearest(q)
         return self._cache_p
 
+    def nearest_of(
+        self, q: np.ndarray, idx: np.ndarray
+    ) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+        """Fingers ``idx``' entries of :meth:`finger_points` and :meth:`finger_distances`:
+        (body names, (k, 3) points [m], (k,) signed distances [m]), computing only theirs (the
+        grip squeeze presses the contacting fingers)."""
+        idx = np.asarray(idx, dtype=int)
+        self._nearest(q, idx)
+        bodies = tuple(self._cache_b[i] for i in idx.tolist())
+        return bodies, self._cache_p[idx], self._cache_d[idx]
+
     def finger_distances(self, q: np.ndarray) -> np.ndarray:
         """(F,) [m] signed distance from each finger to the object (negative: penetrating)."""
         self._nearest(q)
