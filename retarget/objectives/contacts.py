@@ -299,10 +299,8 @@ class SurfaceContactObjective(Objective):
     def _points_and_jacobians(self, state: RobotState, idx: np.ndarray):
         """The active fingers' (``idx``) surface points nearest the object (k, 3) [m] and
         their point Jacobians (k, 3, nv), world axes."""
-        self._nearest(state.q, idx)
-        points = self._cache_p[idx]
-        J = state.kin.point_jacobians(tuple(self._cache_b[i] for i in idx.tolist()), points)
-        return points, np.ascontiguousarray(J)
+        bodies, points, _ = self.nearest_of(state.q, idx)
+        return points, np.ascontiguousarray(state.kin.point_jacobians(bodies, points))
 
     def qp_terms(self, state: RobotState) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`error` and :meth:`jacobian` in one pass over the active fingers (the same
