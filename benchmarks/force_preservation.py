@@ -38,7 +38,10 @@ Per hand (``--hands``, default every registered hand; a hand skips pairs it cann
 * **(d) + forces** — ``force_matching=True`` on the force-annotated demonstration (contacts
   inferred from its geometry as in (c), the human's per-finger forces from its records →
   force-distribution QP → ``K⁻¹Jᵀf`` offsets),
-  re-simulated on ``q_command`` with stiff contacts (``retarget.run.FORCE_CONTACT_TIMECONST``);
+  re-simulated on ``q_command`` with stiff contacts (``retarget.run.FORCE_CONTACT_TIMECONST``),
+  then force-calibrated as ``retarget run --forces`` does (``retarget.calibrate``,
+  ``--calibrate-iterations``, default 6; 0: the planned commands): the row is the chosen
+  iterate's, with the planned commands' success in ``planned_success``;
   (a)–(c) use the re-simulation's default contacts;
 * **(e) + refinement** — (d), and where (d)'s replay fails, ``retarget.refine.refine``: the
   force pipeline's sampling MPC on the robot hand (stiff contacts, as (d)), starting from (d)'s
@@ -202,6 +205,9 @@ class BenchConfig:
     refine_overrides: dict = field(default_factory=dict)
     """``RefineConfig`` fields changed for variant (e)'s refinement (``--refine-set
     NAME=VALUE``)."""
+    calibrate_iterations: int = 6
+    """Variant (d)'s force calibration (``retarget.calibrate``; ``CalibrateConfig.iterations``,
+    as ``retarget run --forces``): 0 re-simulates the planned commands only."""
     human_cache: Path | None = None
     """Directory of cached human simulations (``--human-cache``): a (demonstration, object,
     tracker) simulated once is read back on later runs instead of simulated again."""
@@ -228,6 +234,10 @@ class BenchConfig:
             )
         if self.workers < 1:
             raise SystemExit(f"--workers must be >= 1, got {self.workers}")
+        if self.calibrate_iterations < 0:
+            raise SystemExit(
+                f"--calibrate-iterations must be >= 0, got {self.calibrate_iterations}"
+            )
         if self.dex_wrist not in ("free", "fixed"):
             raise SystemExit(f"--dex-wrist must be free or fixed, got {self.dex_wrist!r}")
         bad_v = [v for v in self.variants if v not in RUN_VARIANTS]
@@ -336,6 +346,29 @@ def _force_columns(human_force, robot_d, sim_res, human, retargeter, variant: st
     return m
 
 
+def _calibrated(rt, resim, robot, human, sim, m: dict, n: int) -> tuple[dict, object]:
+    """(d)'s force calibration (``retarget.calibrate``) of ``robot`` (whose re-simulation is
+    ``sim``, metrics ``m``): the row's metrics and simulation become the chosen iterate's,
+    ``robot.q_command`` its commands; the planned commands' result stays in ``planned_*``."""
+    from retarget.calibrate import CalibrateConfig, calibrate_forces
+
+    cal = calibrate_forces(rt, resim, robot, human, sim, CalibrateConfig(iterations=n))
+    cm = cal.metrics()
+    out = {**m, **cal.sim.metrics()}
+    out["sim_penetration_max_m"] = out.pop("penetration_max_m")
+    out.update(
+        planned_success=m["success"],
+        planned_object_pos_err_max_m=m["object_pos_err_max_m"],
+        calibration_iterate=cm["chosen_iterate"],
+        calibration_s=cm["compute_s"],
+        calibration_force_error_before=cm["force_error_before"],
+        calibration_force_error_after=cm["force_error_after"],
+        calibration_finger_cmd_deviation_mean_rad=cm["finger_cmd_deviation_mean_rad"],
+    )
+    robot.q_command = cal.q_command
+    return out, cal.sim
+
+
 def _hand_job(args) -> list[dict]:
     """Worker: variants (a)–(d) of one hand on one (pair, object); one row per variant."""
     from dexcanvas_core.demos.geometry import object_geometry
@@ -346,7 +379,7 @@ def _hand_job(args) -> list[dict]:
     from retarget.run import FORCE_CONTACT_TIMECONST, refined_force_metrics
     from retarget.validate import Resimulator, ValidateConfig
 
-    base, traj, human, dex_wrist, computed, overrides, refine_overrides = args
+    base, traj, human, dex_wrist, computed, overrides, refine_overrides, n_calibrate = args
     rows = {v: {**base, "variant": v} for v in RUN_VARIANTS}
     for v in RUN_VARIANTS:
         if v not in computed:
@@ -389,6 +422,8 @@ def _hand_job(args) -> list[dict]:
                 retargeters[v] = rt
                 if v == "d":
                     robot_d = robot
+                    if n_calibrate > 0 and sims[v] is not None:
+                        m, sims[v] = _calibrated(rt, sim, robot, src, sims[v], m, n_calibrate)
                 row.update(
                     ms_per_frame=robot.ms_per_frame, **KinematicMetrics.of(robot).summary(), **m
                 )
@@ -1366,6 +1401,7 @@ def run_jobs(cfg: BenchConfig, demos: list, plans: list, hands: list, console):
                     computed,
                     cfg.overrides,
                     cfg.refine_overrides,
+                    cfg.calibrate_iterations,
                 )
                 pending[pool.submit(_hand_job, job)] = ("hand", i, k)
 
@@ -1672,6 +1708,14 @@ def main(argv: list[str] | None = None) -> int:
         "--refine-set retries=2",
     )
     ap.add_argument(
+        "--calibrate-iterations",
+        type=int,
+        default=6,
+        metavar="N",
+        help="variant (d)'s force calibration: re-simulations correcting the commands until "
+        "the fingers press like the human's (default 6; 0: the planned commands)",
+    )
+    ap.add_argument(
         "--human-cache",
         type=Path,
         default=None,
@@ -1708,6 +1752,7 @@ def main(argv: list[str] | None = None) -> int:
         variants=tuple(dict.fromkeys(a.variants)),
         overrides=overrides,
         refine_overrides=refine_overrides,
+        calibrate_iterations=a.calibrate_iterations,
         human_cache=a.human_cache,
         human_replay=a.human_replay,
     )

@@ -167,6 +167,14 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
         help="if the re-simulation fails, refine the commands by sampling MPC on the robot",
     )
     p.add_argument(
+        "--calibrate-iterations",
+        type=_non_negative_int,
+        default=6,  # RunConfig.calibrate_iterations
+        metavar="N",
+        help="with --forces: re-simulations correcting the commands until the fingers press "
+        "like the human's (force calibration; default 6; 0: the planned commands)",
+    )
+    p.add_argument(
         "--refine-retries",
         type=_non_negative_int,
         default=4,  # RunConfig.refine_retries (retarget.run is imported only to run)
@@ -225,6 +233,7 @@ def _plain_run_config(args: argparse.Namespace):
         forces=args.forces,
         refine=args.refine,
         refine_retries=args.refine_retries,
+        calibrate_iterations=args.calibrate_iterations,
         force_scale=args.force_scale,
         human_replay=args.human_replay,
         overrides=dict(args.set or ()),

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import mujoco
 import numpy as np
 
 from retarget.errors import RetargetError
@@ -168,3 +169,21 @@ def squeeze_offsets(jacobians: list[np.ndarray], forces: np.ndarray, kp: np.ndar
     with np.errstate(divide="ignore"):
         out = np.where(np.isfinite(kp) & (kp > 0), tau / np.where(kp > 0, kp, 1.0), 0.0)
     return out
+
+
+def servo_gains(model: mujoco.MjModel, nq: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(kp, tau_max)`` per hand joint (the first ``nq`` of ``qpos``, a floating wrist's 6
+    first): position-servo gain [N·m/rad or N/m] and force limit of the finger joints'
+    actuators (``inf`` where none: the wrist, passive joints)."""
+    kp = np.full(nq, np.inf)
+    tau_max = np.full(nq, np.inf)
+    for a in range(model.nu):
+        if model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT:
+            continue
+        dof = model.jnt_dofadr[model.actuator_trnid[a, 0]]
+        if dof < 6 or dof >= nq:
+            continue
+        kp[dof] = model.actuator_gainprm[a, 0]
+        if model.actuator_forcelimited[a]:
+            tau_max[dof] = model.actuator_forcerange[a, 1]
+    return kp, tau_max

@@ -1042,21 +1042,10 @@ class Retargeter:
         }
 
     def _servo_gains(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(kp, tau_max)`` per hand joint: position-servo gain [N·m/rad or N/m] and force
-        limit of the finger joints' actuators (``inf`` where none: the wrist, passive joints)."""
-        m = self.scene.model
-        kp = np.full(self.nq, np.inf)
-        tau_max = np.full(self.nq, np.inf)
-        for a in range(m.nu):
-            if m.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT:
-                continue
-            dof = m.jnt_dofadr[m.actuator_trnid[a, 0]]
-            if dof < 6 or dof >= self.nq:
-                continue
-            kp[dof] = m.actuator_gainprm[a, 0]
-            if m.actuator_forcelimited[a]:
-                tau_max[dof] = m.actuator_forcerange[a, 1]
-        return kp, tau_max
+        """``(kp, tau_max)`` per hand joint (:func:`retarget.force_matching.servo_gains`)."""
+        from retarget.force_matching import servo_gains
+
+        return servo_gains(self.scene.model, self.nq)
 
     def _object_com(self) -> np.ndarray:
         from dexcanvas_core.sim.scene import primitive_volume

@@ -54,6 +54,11 @@ class RunConfig:
     result."""
     refine_retries: int = 4
     """How often the refinement backtracks when it loses the object (``RefineConfig.retries``)."""
+    calibrate_iterations: int = 6
+    """``forces``: corrected re-simulations of the force calibration (``retarget.calibrate``:
+    the servo commands corrected in re-simulation until the fingers press like the human's;
+    the written commands and the reported result are the chosen iterate's, ``calibration`` in
+    ``metrics.json`` says what it changed). 0: the force-matched commands as planned."""
     force_scale: float = 1.0
     """Force matching presses with this multiple of the human's forces
     (``RetargetConfig.force_scale``: a grip margin); needs ``forces``."""
@@ -450,9 +455,19 @@ def run_retarget(cfg: RunConfig) -> dict:
             replay = _human_replay(traj, pair, prog, retargeter.tip_human)
         robot = retargeter.retarget(traj, progress=prog.task("retargeting", traj.num_frames))
         vcfg = ValidateConfig(contact_timeconst=FORCE_CONTACT_TIMECONST if cfg.forces else None)
-        sim = Resimulator(hand, geometry, vcfg).run(
-            robot.q_command, traj, progress=prog.task("re-simulating", traj.num_frames)
-        )
+        resim = Resimulator(hand, geometry, vcfg)
+        sim = resim.run(robot.q_command, traj, progress=prog.task("re-simulating", traj.num_frames))
+        calibrated = planned = None
+        if cfg.forces and cfg.calibrate_iterations > 0:
+            from retarget.calibrate import CalibrateConfig, calibrate_forces
+
+            n = cfg.calibrate_iterations
+            calibrated = calibrate_forces(
+                retargeter, resim, robot, traj, sim, CalibrateConfig(iterations=n),
+                progress=prog.task(f"calibrating forces ({n} re-simulations)", n + 1),
+            )  # fmt: skip
+            sim, planned = calibrated.sim, robot.q_command
+            robot.q_command = calibrated.q_command
 
     kin_pen = (
         float(max(0.0, -np.min(robot.min_distance)))
@@ -491,6 +506,8 @@ def run_retarget(cfg: RunConfig) -> dict:
         metrics["human_force_pipeline"] = human_sim
         if replay is not None:
             metrics["human_replay"] = replay
+    if calibrated is not None:
+        metrics["calibration"] = calibrated.metrics()
     refined = None
     if cfg.refine and not sim.success:
         from retarget.refine import RefineConfig, refine
@@ -509,15 +526,19 @@ def run_retarget(cfg: RunConfig) -> dict:
         if cfg.forces:
             metrics["refine"]["forces"] = refined_force_metrics(robot, refined, traj, retargeter)
     robot.meta["simulation"] = sim.meta
-    _save(out_dir, robot, sim, refined)
+    _save(out_dir, robot, sim, refined, planned)
     _atomic_write_text(out_dir / "metrics.json", json.dumps(metrics, indent=2, sort_keys=True))
     if cfg.progress:
         _print_summary(metrics, out_dir)
     return metrics
 
 
-def _save(out_dir: Path, robot, sim, refined=None) -> None:
+def _save(out_dir: Path, robot, sim, refined=None, planned=None) -> None:
+    """``planned``: the force-matched commands before force calibration (``q_command`` is the
+    calibrated ones)."""
     extra = {} if refined is None else {"ctrl_refined": refined.ctrl}
+    if planned is not None:
+        extra["q_command_planned"] = planned
     robot.save_npz(
         out_dir / "robot_trajectory.npz",
         extra=extra
@@ -654,6 +675,18 @@ def _print_summary(m: dict, out_dir: Path) -> None:
         else:
             text = f"[red]lost the object at frame {hr['failed_at_frame']}[/red]: no ceiling"
         t.add_row(f"human replay (MPC seed {hr['mpc_seed']})", text)
+    if "calibration" in m:
+        c = m["calibration"]
+        first = c["iterates"][0]
+        planned = "kept" if first["success"] else "lost"
+        t.add_row(
+            "force calibration",
+            f"iterate {c['chosen_iterate']} of {len(c['iterates']) - 1} (the plan {planned} the "
+            f"object); force error {_num(c['force_error_before'])} → "
+            f"{_num(c['force_error_after'])}; commands moved "
+            f"{np.degrees(c['finger_cmd_deviation_mean_rad']):.2f}° (fingers); "
+            f"{c['compute_s']:.1f} s",
+        )
     if "refine" in m:
         r = m["refine"]
         ok = "[green]SUCCESS[/green]" if r["success"] else "[red]FAILED[/red]"

@@ -5,6 +5,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
+from finger_scenes import finger_pressing_a_fixed_box
 
 from retarget.errors import RetargetError
 from retarget.force_matching import distribute, grasp_matrix, squeeze_offsets
@@ -75,38 +76,11 @@ def test_bad_inputs_are_refused():
         distribute(points, normals[:2], np.zeros((3, 3)), np.zeros(6), np.zeros(3))
 
 
-def _finger_pressing_a_fixed_box(solref: float):
-    """A two-joint finger with position servos above a fixed box (its distal link touching)."""
-    spec = mujoco.MjSpec()
-    spec.compiler.degree = False
-    spec.option.timestep = 0.002
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
-    b1 = spec.worldbody.add_body(name="l1", pos=[0, 0, 0.1], gravcomp=1)
-    b1.add_joint(name="j1", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0], damping=0.05,
-                 armature=1e-4)  # fmt: skip
-    b1.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0.05, 0, 0],
-                size=[0.008, 0, 0], density=1000)  # fmt: skip
-    b2 = b1.add_body(name="l2", pos=[0.05, 0, 0], gravcomp=1)
-    b2.add_joint(name="j2", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0], damping=0.05,
-                 armature=1e-4)  # fmt: skip
-    b2.add_geom(name="tip", type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0.04, 0, 0],
-                size=[0.008, 0, 0], density=1000)  # fmt: skip
-    spec.worldbody.add_geom(name="box", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.05, 0.05, 0.02],
-                            pos=[0.115, 0, 0.1 - 0.008 - 0.02])  # fmt: skip
-    for j, kp in (("j1", 5.0), ("j2", 3.0)):
-        a = spec.add_actuator(name=j, target=j, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-        a.set_to_position(kp=kp, dampratio=1.0)
-    for g in spec.geoms:
-        g.solref = [solref, 1.0]
-    return spec.compile()
-
-
 def test_squeeze_offsets_press_with_the_intended_force():
     """Δq = K⁻¹Jᵀf on a single finger against a fixed box: the contact force is the command
     within 10 % (with the stiff contacts force matching runs with; soft default contacts let
     the finger sink in and lose ~25 %)."""
-    m = _finger_pressing_a_fixed_box(solref=0.005)
+    m = finger_pressing_a_fixed_box(solref=0.005)
     d = mujoco.MjData(m)
     kp = m.actuator_gainprm[:, 0]
     for F in (1.0, 3.0, 6.0):
@@ -131,7 +105,7 @@ def test_squeeze_offsets_press_with_the_intended_force():
     assert out[1] == 0.0 and out[2] == 0.0 and out[0] == pytest.approx(3.0)
 
 
-def _coupled_finger_pressing_a_fixed_box():
+def _coupledfinger_pressing_a_fixed_box():
     """A two-joint finger with one servo, on the proximal joint; the distal joint is tied to it
     by a linkage, ``j2 = 1.5 j1`` (Ability's and Inspire's fingers, SVH's mimic joints). Only
     the sphere at its tip rests on a fixed box."""
@@ -170,7 +144,7 @@ def test_a_coupled_joint_carries_its_share_of_the_squeeze():
     own Jacobian column alone (the linkage's joint left out) presses with less than 75 % of it."""
     from retarget.limits.coupling import CouplingLimit
 
-    m = _coupled_finger_pressing_a_fixed_box()
+    m = _coupledfinger_pressing_a_fixed_box()
     d = mujoco.MjData(m)
     kp = np.array([5.0, np.inf])
     C = CouplingLimit.from_mjmodel(m).follower_map(np.zeros(2), np.array([False, True]))
@@ -196,7 +170,7 @@ def test_a_coupled_joint_carries_its_share_of_the_squeeze():
 def test_soft_default_contacts_press_less_than_commanded():
     """Why force matching stiffens contacts: at MuJoCo's default solref (0.02 s) the finger sinks
     into the box and the servo loses part of its deflection."""
-    m = _finger_pressing_a_fixed_box(solref=0.02)
+    m = finger_pressing_a_fixed_box(solref=0.02)
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)
     jacp = np.zeros((3, m.nv))
@@ -432,6 +406,20 @@ def test_cli_run_forces_reports_force_preservation(human_with_forces, tmp_path):
         assert m[key] is not None and np.isfinite(m[key])
     assert set(m["force_per_finger"]) == {"thumb", "index", "middle", "ring"}
     assert 0.0 <= m["contact_recall"] <= 1.0
+    # Force calibration (6 re-simulations by default): the written commands are the chosen
+    # iterate's, the planned ones kept beside them; the result reported is the chosen one's.
+    cal = m["calibration"]
+    assert len(cal["iterates"]) == 7 and 0 <= cal["chosen_iterate"] <= 6
+    chosen = cal["iterates"][cal["chosen_iterate"]]
+    assert chosen["success"] == m["success"]
+    assert chosen["object_pos_err_max_m"] == pytest.approx(m["object_pos_err_max_m"])
+    if cal["iterates"][0]["success"]:  # calibration never loses a kept object
+        assert m["success"]
+        assert cal["force_error_after"] <= cal["force_error_before"]
+    with np.load(out / "robot_trajectory.npz") as z:
+        dq = z["q_command"] - z["q_command_planned"]
+    assert np.all(dq[:, :6] == 0.0)  # the wrist is not calibrated
+    assert (np.abs(dq).max() > 0) == (cal["chosen_iterate"] > 0)
     # The report's force plot adds the plan: the force QP's force per mapped finger.
     from dexcanvas_core.trajectory import FORCE_GROUPS
     from retarget.hands import get_hand

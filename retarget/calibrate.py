@@ -1,0 +1,249 @@
+"""Force calibration: force-matched servo commands corrected in the re-simulation until each
+robot finger presses as hard as its human finger did.
+
+Force matching (:mod:`retarget.force_matching`) turns the human's per-finger forces into servo
+command offsets, ``Δq = K⁻¹ Jᵀ f``, planned on the kinematic solution: the finger is assumed
+blocked by the object where the plan put it. Replayed open loop, the object drifts from its
+planned pose, a finger meets the surface early or late, the contact is compliant, and the
+forces the servos press with differ from the plan's (on the force-preservation benchmark, a
+light touch pressed at 0.1–4.5 mm from the simulated object reproduces its human profile at
+0.3; ``retarget.run.LOAD_BEARING_SHARE``).
+
+This stage closes that loop the way iterative learning control does: it re-simulates the
+commands, measures each finger's force ``R_f(t)`` against the human's ``H_f(t)``, and adds
+``g · K⁻¹ Jᵀ ((‖H_f‖ − ‖R_f‖) u_f)`` per finger and frame (``u_f`` the unit direction of the
+simulated finger's force on the object, or of the human's where the robot finger presses
+nothing; the error smoothed over ``smooth_s``; ``J`` the fingertip's Jacobian through the
+servoed joints and the joints coupled to them). Frames after a re-simulation lost the object
+are left alone. Every iterate is re-simulated; the result is the iterate with the smallest
+force error among those that keep the object (strict success), else the input commands, so
+calibration never turns a success into a failure.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+
+import mujoco
+import numpy as np
+
+from retarget.errors import RetargetError
+from retarget.force_matching import servo_gains, squeeze_offsets
+
+
+@dataclass(frozen=True)
+class CalibrateConfig:
+    iterations: int = 6
+    """Corrected iterates after the input commands' re-simulation (each costs one)."""
+    gain: float = 0.5
+    """Share ``g`` of each frame's force error corrected per iterate."""
+    smooth_s: float = 0.075
+    """Moving-average window [s] of the per-finger force error."""
+    tolerance_n: float = 0.02
+    """Force errors [N] below this are left alone."""
+
+    def validate(self) -> CalibrateConfig:
+        if not (isinstance(self.iterations, int) and self.iterations >= 0):
+            raise RetargetError(
+                f"calibration iterations must be an int >= 0, got {self.iterations}"
+            )
+        for k in ("gain", "smooth_s", "tolerance_n"):
+            v = getattr(self, k)
+            if not (np.isfinite(v) and v >= 0):
+                raise RetargetError(f"calibration {k} must be finite and >= 0, got {v}")
+        if not 0 < self.gain <= 1:
+            raise RetargetError(f"calibration gain must be in (0, 1], got {self.gain}")
+        return self
+
+
+@dataclass
+class Iterate:
+    """One re-simulated iterate (0: the input commands)."""
+
+    success: bool
+    first_failure_frame: int | None
+    object_pos_err_max_m: float
+    force_error: float | None
+    """:func:`force_error` of its re-simulation against the human's forces."""
+
+
+@dataclass
+class CalibrationResult:
+    q_command: np.ndarray
+    """(T, nq) the chosen iterate's servo commands."""
+    sim: object
+    """Its re-simulation (``ValidationResult``)."""
+    chosen: int
+    """Index of the chosen iterate in ``iterates`` (0: the input commands)."""
+    iterates: list[Iterate] = field(default_factory=list)
+    finger_cmd_deviation_rad: float = 0.0
+    """Mean ``|Δ|`` of the finger joints' commands from the input ones, over every frame."""
+    compute_s: float = 0.0
+    """CPU time of the re-simulations and corrections [s]."""
+
+    @property
+    def success(self) -> bool:
+        return bool(self.iterates[self.chosen].success)
+
+    def metrics(self) -> dict:
+        first = self.iterates[0]
+        best = self.iterates[self.chosen]
+        return {
+            "success": self.success,
+            "chosen_iterate": self.chosen,
+            "iterates": [asdict(it) for it in self.iterates],
+            "force_error_before": first.force_error,
+            "force_error_after": best.force_error,
+            "finger_cmd_deviation_mean_rad": self.finger_cmd_deviation_rad,
+            "compute_s": self.compute_s,
+        }
+
+
+def force_error(H: np.ndarray, R: np.ndarray) -> float | None:
+    """``Σ |‖R‖ − ‖H‖| / Σ ‖H‖`` over the fingers the human loads (above 0.05 N on more than 2
+    frames; ``H``, ``R``: (T, F, 3) [N] or (T, F) magnitudes); ``None`` when it loads none."""
+    Hn = np.linalg.norm(H, axis=2) if np.ndim(H) == 3 else np.asarray(H)
+    Rn = np.linalg.norm(R, axis=2) if np.ndim(R) == 3 else np.asarray(R)
+    used = (Hn > 0.05).sum(axis=0) > 2
+    if not used.any():
+        return None
+    return float(np.abs(Rn - Hn)[:, used].sum() / Hn[:, used].sum())
+
+
+def _smooth(x: np.ndarray, n: int) -> np.ndarray:
+    """Centred moving average of each column of ``x`` (T, F) over ``n`` frames (edges held)."""
+    if n <= 1:
+        return x
+    k = np.ones(n) / n
+    pad = (n // 2, n - 1 - n // 2)
+    return np.stack([np.convolve(np.pad(c, pad, mode="edge"), k, "valid") for c in x.T], axis=1)
+
+
+def correction(
+    model: mujoco.MjModel,
+    nq: int,
+    q: np.ndarray,
+    tip_sites: list[str],
+    target: np.ndarray,
+    realized: np.ndarray,
+    gain: float,
+    smooth_frames: int,
+    tolerance_n: float,
+    frames: int | None = None,
+) -> np.ndarray:
+    """(T, nq) command change of one iterate (module doc): per frame ``t < frames`` and finger
+    ``f``, ``g · C K⁻¹ (J_f C)ᵀ (e_f u_f)`` with ``e_f = ‖target_f‖ − ‖realized_f‖`` smoothed
+    over ``smooth_frames``, ``u_f`` the unit direction of ``realized_f`` (of ``target_f`` where
+    the robot finger presses below 0.05 N), ``J_f`` the Jacobian of tip site ``f`` at ``q[t]``
+    and ``C`` the servoed finger joints' follower map (``servo_follower_map``; the wrist's
+    columns zero). ``model``: a scene whose first ``nq`` ``qpos`` are the hand's joints.
+    ``target``, ``realized``: (T, F, 3) [N] forces on the object, ``tip_sites`` order."""
+    from retarget.limits.coupling import CouplingLimit, servo_follower_map
+
+    T, F = target.shape[:2]
+    if realized.shape != target.shape or q.shape != (T, nq) or len(tip_sites) != F:
+        raise RetargetError(
+            f"force calibration: target {target.shape}, realized {realized.shape}, joints "
+            f"{q.shape} and {len(tip_sites)} tip sites do not match"
+        )
+    frames = T if frames is None else min(frames, T)
+    Hn = np.linalg.norm(target, axis=2)
+    Rn = np.linalg.norm(realized, axis=2)
+    e = _smooth(Hn - Rn, smooth_frames)
+    u = np.where((Rn > 0.05)[..., None], realized, target)
+    un = np.linalg.norm(u, axis=2, keepdims=True)
+    u = np.where(un > 1e-9, u / np.maximum(un, 1e-9), 0.0)
+    kp, _ = servo_gains(model, nq)
+    coupling = CouplingLimit.from_mjmodel(model)
+    d = mujoco.MjData(model)
+    jacp = np.zeros((3, model.nv))
+    sites = [model.site(s).id for s in tip_sites]
+    out = np.zeros((T, nq))
+    C = None
+    for t in range(frames):
+        todo = np.flatnonzero((np.abs(e[t]) > tolerance_n) & u[t].any(axis=1))
+        if todo.size == 0:
+            continue
+        d.qpos[:nq] = q[t]
+        mujoco.mj_kinematics(model, d)
+        mujoco.mj_comPos(model, d)  # (the Jacobians need cdof)
+        if C is None or not coupling.linear:
+            C = servo_follower_map(model, q[t], nq, coupling)
+            C[:, :6] = 0.0  # the wrist's servos do not press
+        Js, fs = [], []
+        for i in todo:
+            mujoco.mj_jacSite(model, d, jacp, None, sites[i])
+            Js.append(jacp[:, :nq] @ C)
+            fs.append(e[t, i] * u[t, i])
+        out[t] = gain * (C @ squeeze_offsets(Js, np.array(fs), kp))
+    return out
+
+
+def calibrate_forces(
+    retargeter,
+    resimulator,
+    robot,
+    human,
+    sim=None,
+    cfg: CalibrateConfig | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> CalibrationResult:
+    """Calibrate force-matched ``robot`` (a ``RobotTrajectory`` of ``human`` made by
+    ``retargeter`` with ``force_matching``) in ``resimulator``'s scene (module doc).
+
+    ``sim``: the input commands' re-simulation, when already run (it is iterate 0).
+    Returns the chosen iterate and every iterate's success and force error."""
+    cfg = (cfg or CalibrateConfig()).validate()
+    if robot.human_force is None:
+        raise RetargetError(
+            "force calibration matches the human's forces: retarget with force matching "
+            "(retarget run --forces) first"
+        )
+    m, nq = resimulator.model, resimulator.hand_nq
+    if robot.q.shape[1] != nq:
+        raise RetargetError(
+            f"force calibration: trajectory has {robot.q.shape[1]} joints, the scene {nq}"
+        )
+    col = [resimulator.fingers.index(retargeter.hand.fingers[f]) for f in retargeter.tip_human]
+    target = retargeter.cfg.force_scale * np.asarray(robot.human_force, dtype=np.float64)
+    n_smooth = max(1, round(cfg.smooth_s * human.fps))
+    t0 = time.process_time()
+    q_cmd = np.asarray(robot.q_command, dtype=np.float64)
+    cmds, sims, its = [], [], []
+    for k in range(cfg.iterations + 1):
+        if k > 0:
+            prev = sims[-1]
+            dq = correction(
+                m, nq, robot.q, robot.tip_sites, target, prev.finger_force_world[:, col],
+                cfg.gain, n_smooth, cfg.tolerance_n, prev.first_failure_frame,
+            )  # fmt: skip
+            q_cmd = np.stack([retargeter._within_limits(x) for x in q_cmd + dq])
+        s = sim if (k == 0 and sim is not None) else resimulator.run(q_cmd, human)
+        cmds.append(q_cmd)
+        sims.append(s)
+        its.append(
+            Iterate(
+                success=bool(s.success),
+                first_failure_frame=s.first_failure_frame,
+                object_pos_err_max_m=float(s.object_pos_err.max()),
+                force_error=force_error(target, s.finger_force_world[:, col]),
+            )
+        )
+        if progress is not None:
+            progress(k + 1, cfg.iterations + 1)
+    ok = [k for k, it in enumerate(its) if it.success]
+    chosen = min(
+        ok, default=0, key=lambda k: np.inf if its[k].force_error is None else its[k].force_error
+    )
+    fingers = np.isfinite(servo_gains(m, nq)[0])
+    dev = np.abs(cmds[chosen] - cmds[0])[:, fingers]
+    return CalibrationResult(
+        q_command=cmds[chosen],
+        sim=sims[chosen],
+        chosen=chosen,
+        iterates=its,
+        finger_cmd_deviation_rad=float(dev.mean()) if dev.size else 0.0,
+        compute_s=time.process_time() - t0,
+    )
