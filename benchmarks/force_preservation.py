@@ -39,7 +39,7 @@ Per hand (``--hands``, default every registered hand; a hand skips pairs it cann
   inferred from its geometry as in (c), the human's per-finger forces from its records →
   force-distribution QP → ``K⁻¹Jᵀf`` offsets),
   re-simulated on ``q_command`` with stiff contacts (``retarget.run.FORCE_CONTACT_TIMECONST``),
-  then force-calibrated as ``retarget run --forces`` does (``retarget.calibrate``,
+  then force-calibrated as ``retarget run --forces`` does (``retarget.force_calibration``,
   ``--calibrate-iterations``, default 6; 0: the planned commands): the row is the chosen
   iterate's, with the planned commands' success in ``planned_success``;
   (a)–(c) use the re-simulation's default contacts;
@@ -206,8 +206,9 @@ class BenchConfig:
     """``RefineConfig`` fields changed for variant (e)'s refinement (``--refine-set
     NAME=VALUE``)."""
     calibrate_iterations: int = 6
-    """Variant (d)'s force calibration (``retarget.calibrate``; ``CalibrateConfig.iterations``,
-    as ``retarget run --forces``): 0 re-simulates the planned commands only."""
+    """Variant (d)'s force calibration (``retarget.force_calibration``,
+    ``ForceCalibrationConfig.iterations``, as ``retarget run --forces``): 0 re-simulates the
+    planned commands only."""
     human_cache: Path | None = None
     """Directory of cached human simulations (``--human-cache``): a (demonstration, object,
     tracker) simulated once is read back on later runs instead of simulated again."""
@@ -347,12 +348,12 @@ def _force_columns(human_force, robot_d, sim_res, human, retargeter, variant: st
 
 
 def _calibrated(rt, resim, robot, human, sim, m: dict, n: int) -> tuple[dict, object]:
-    """(d)'s force calibration (``retarget.calibrate``) of ``robot`` (whose re-simulation is
+    """(d)'s force calibration (``retarget.force_calibration``) of ``robot`` (whose re-simulation is
     ``sim``, metrics ``m``): the row's metrics and simulation become the chosen iterate's,
     ``robot.q_command`` its commands; the planned commands' result stays in ``planned_*``."""
-    from retarget.calibrate import CalibrateConfig, calibrate_forces
+    from retarget.force_calibration import ForceCalibrationConfig, calibrate_forces
 
-    cal = calibrate_forces(rt, resim, robot, human, sim, CalibrateConfig(iterations=n))
+    cal = calibrate_forces(rt, resim, robot, human, sim, ForceCalibrationConfig(iterations=n))
     cm = cal.metrics()
     out = {**m, **cal.sim.metrics()}
     out["sim_penetration_max_m"] = out.pop("penetration_max_m")

@@ -144,6 +144,10 @@ class RefineResult:
     compute_s: float
     attempts: int = 1
     """Tracking attempts (1 + the backtracking retries used)."""
+    calibration: dict | None = None
+    """:func:`calibrate_refined`'s ``ForceCalibrationResult.metrics()`` when the refined
+    commands were force-calibrated (``ctrl`` and the errors and forces are then the chosen
+    iterate's)."""
     finger_force_world: np.ndarray | None = None
     """(T_tracked, F + 1, 3) [N]: force of each robot finger (``fingers`` order) and the palm
     on the object in the refined simulation, world frame, averaged over the frame's physics
@@ -163,6 +167,7 @@ class RefineResult:
             "wrist_rot_deviation_mean_rad": self.wrist_rot_deviation_rad,
             "compute_s": self.compute_s,
             "attempts": self.attempts,
+            **({} if self.calibration is None else {"calibration": self.calibration}),
             **(
                 {}
                 if self.finger_force_world is None
@@ -295,6 +300,91 @@ def refine(hand, geometry, human, robot, tip_sites: list[str], cfg: RefineConfig
         attempts=attempts,
         finger_force_world=_finger_forces(hand, m, robot_fingers, log.contacts),
         fingers=robot_fingers,
+    )
+
+
+def calibrate_refined(
+    hand, geometry, human, robot, tip_sites: list[str], refined: RefineResult,
+    cfg: RefineConfig | None = None, calibration=None, force_scale: float = 1.0,
+) -> RefineResult:  # fmt: skip
+    """Force calibration (:mod:`retarget.force_calibration`) of a refinement's servo targets in
+    its own scene: the refined targets ``refined.ctrl`` replayed open loop (the tracker with no
+    residual), each robot finger's force compared with the human's (``robot.human_force`` ×
+    ``force_scale``), each finger's targets corrected, ``calibration.iterations`` times
+    (a ``ForceCalibrationConfig``). Iterate 0 is the refinement's own rollout; the result is
+    ``refined`` with the chosen iterate's targets, errors and forces, and ``calibration`` set
+    (its ``compute_s`` added). ``cfg``: the refinement's configuration (its scene)."""
+    from types import SimpleNamespace
+
+    from retarget.force_calibration import ForceCalibrationConfig, correction, iterate
+
+    cfg = RefineConfig() if cfg is None else cfg
+    ccfg = (calibration or ForceCalibrationConfig()).validate()
+    if robot.human_force is None:
+        raise RetargetError(
+            "force calibration matches the human's forces: retarget with force matching "
+            "(retarget run --forces) first"
+        )
+    t0 = time.process_time()
+    env, act_q, _ = _tracking_env(hand, geometry, human, robot, tip_sites, cfg)
+    m, T, nq = env.scene.model, human.num_frames, robot.q.shape[1]
+    fingers = list(hand.robot_fingers)
+    col = [fingers.index(hand.fingers[f]) for f in _human_fingers(hand, tip_sites)]
+    target = force_scale * np.asarray(robot.human_force, dtype=np.float64)
+    n_smooth = max(1, round(ccfg.smooth_s * human.fps))
+    lo, hi = env.ctrl_low, env.ctrl_high
+
+    def simulate(ctrl):
+        env.ctrl_ref = ctrl
+        log = track(env, OpenLoop())
+        pe = np.asarray(log.pos_err)
+        return SimpleNamespace(
+            success=env.failed_at is None and pe.shape[0] == T and bool((pe <= 0.05).all()),
+            first_failure_frame=env.failed_at,
+            object_pos_err=pe,
+            object_rot_err=np.asarray(log.rot_err),
+            finger_force_world=_finger_forces(hand, m, fingers, log.contacts),
+        )
+
+    def step(ctrl, realized, frames):
+        dq = correction(
+            m, nq, robot.q, tip_sites, target, realized, ccfg.gain, n_smooth, ccfg.tolerance_n,
+            frames,
+        )  # fmt: skip
+        return np.clip(ctrl + dq[:, act_q], lo, hi)
+
+    sim0 = SimpleNamespace(
+        success=refined.success, first_failure_frame=refined.failed_at_frame,
+        object_pos_err=refined.object_pos_err, object_rot_err=refined.object_rot_err,
+        finger_force_world=refined.finger_force_world,
+    )  # fmt: skip
+    cmds, sims, its, k = iterate(simulate, step, refined.ctrl, sim0, target, col, ccfg.iterations)
+    fingers_act = [a for a in range(m.nu) if act_q[a] >= 6]
+    dev = np.abs(cmds[k] - cmds[0])[:, fingers_act]
+    cpu = time.process_time() - t0
+    best = its[k]
+    metrics = {
+        "success": bool(best.success),
+        "chosen_iterate": k,
+        "iterates": [vars(it).copy() for it in its],
+        "force_error_before": its[0].force_error,
+        "force_error_after": best.force_error,
+        "finger_cmd_deviation_mean_rad": float(dev.mean()) if dev.size else 0.0,
+        "compute_s": cpu,
+    }
+    s = sims[k]
+    ref_dev = np.abs(cmds[k] - refined.ctrl_reference[: len(cmds[k])])[:, fingers_act]
+    return replace(
+        refined,
+        finger_ctrl_deviation_rad=float(ref_dev.mean()) if ref_dev.size else 0.0,
+        success=bool(best.success),
+        failed_at_frame=s.first_failure_frame,
+        object_pos_err=np.asarray(s.object_pos_err),
+        object_rot_err=np.asarray(s.object_rot_err),
+        ctrl=np.asarray(cmds[k]),
+        finger_force_world=s.finger_force_world,
+        compute_s=refined.compute_s + cpu,
+        calibration=metrics,
     )
 
 

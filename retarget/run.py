@@ -55,10 +55,11 @@ class RunConfig:
     refine_retries: int = 4
     """How often the refinement backtracks when it loses the object (``RefineConfig.retries``)."""
     calibrate_iterations: int = 6
-    """``forces``: corrected re-simulations of the force calibration (``retarget.calibrate``:
-    the servo commands corrected in re-simulation until the fingers press like the human's;
-    the written commands and the reported result are the chosen iterate's, ``calibration`` in
-    ``metrics.json`` says what it changed). 0: the force-matched commands as planned."""
+    """``forces``: corrected re-simulations of the force calibration
+    (``retarget.force_calibration``: the servo commands corrected in re-simulation until the
+    fingers press like the human's; the written commands and the reported result are the
+    chosen iterate's, ``calibration`` in ``metrics.json`` says what it changed). 0: the
+    force-matched commands as planned."""
     force_scale: float = 1.0
     """Force matching presses with this multiple of the human's forces
     (``RetargetConfig.force_scale``: a grip margin); needs ``forces``."""
@@ -459,11 +460,11 @@ def run_retarget(cfg: RunConfig) -> dict:
         sim = resim.run(robot.q_command, traj, progress=prog.task("re-simulating", traj.num_frames))
         calibrated = planned = None
         if cfg.forces and cfg.calibrate_iterations > 0:
-            from retarget.calibrate import CalibrateConfig, calibrate_forces
+            from retarget.force_calibration import ForceCalibrationConfig, calibrate_forces
 
             n = cfg.calibrate_iterations
             calibrated = calibrate_forces(
-                retargeter, resim, robot, traj, sim, CalibrateConfig(iterations=n),
+                retargeter, resim, robot, traj, sim, ForceCalibrationConfig(iterations=n),
                 progress=prog.task(f"calibrating forces ({n} re-simulations)", n + 1),
             )  # fmt: skip
             sim, planned = calibrated.sim, robot.q_command

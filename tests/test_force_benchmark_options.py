@@ -64,16 +64,16 @@ def test_refine_set_refuses_an_unknown_refinement_field():
 def test_hand_job_runs_only_the_requested_variants_with_the_overrides(traj):
     base = {"hand": "shadow", "index": 0, "pair": "cube2/tripod", "object_id": "cube2"}
     base.update(object_variant="light", frames=traj.num_frames, human_forces=False)
-    job = (base, traj, None, "free", ("c",), {}, {})
+    job = (base, traj, None, "free", ("c",), {}, {}, 6)
     rows = {r["variant"]: r for r in fp._hand_job(job)}
     assert set(rows) == set(fp.RUN_VARIANTS)
     assert all(rows[v]["skipped"] == fp.NOT_REQUESTED for v in ("a", "b", "d", "e"))
     assert "error" not in rows["c"] and "success" in rows["c"]
     # an override reaches our retargeter: a refused value fails (c) with the config's message
-    bad = {r["variant"]: r for r in fp._hand_job((*job[:5], {"iterations": 0}, {}))}
+    bad = {r["variant"]: r for r in fp._hand_job((*job[:5], {"iterations": 0}, {}, 6))}
     assert "iterations must be >= 1" in bad["c"]["error"]
     # and a valid one changes the solution
-    light = {r["variant"]: r for r in fp._hand_job((*job[:5], {"w_contacts": 1.0}, {}))}
+    light = {r["variant"]: r for r in fp._hand_job((*job[:5], {"w_contacts": 1.0}, {}, 6))}
     assert light["c"]["contact_err_mean_m"] != rows["c"]["contact_err_mean_m"]
 
 

@@ -886,14 +886,18 @@ def test_force_benchmark_scores_every_variant_against_the_human_without_d(human_
     h = human_with_forces.slice(250, 400)
     base = {"hand": "shadow", "index": 0, "pair": "cube2/tripod", "object_id": "cube2"}
     base.update(object_variant="light", frames=h.num_frames, human_forces=True)
-    alone = {r["variant"]: r for r in fp._hand_job((base, h, h, "free", ("c",), {}, {}))}
-    both = {r["variant"]: r for r in fp._hand_job((base, h, h, "free", ("c", "d"), {}, {}))}
+    alone = {r["variant"]: r for r in fp._hand_job((base, h, h, "free", ("c",), {}, {}, 2))}
+    both = {r["variant"]: r for r in fp._hand_job((base, h, h, "free", ("c", "d"), {}, {}, 2))}
     for k in ("force_profile_correlation_mean", "force_correlation_mean", "contact_recall"):
         assert alone["c"][k] is not None
         assert alone["c"][k] == pytest.approx(both["c"][k])
     assert alone["c"]["force_per_finger"] == both["c"]["force_per_finger"]
     assert alone["c"]["wrench_feasible_fraction"] is None  # the force QP's: (d) only
     assert both["d"]["wrench_feasible_fraction"] is not None
+    # (d) is force-calibrated (2 iterations here): the row is the chosen iterate's, the plan's
+    # own result beside it; a kept lift stays kept
+    assert both["d"]["calibration_iterate"] in (0, 1, 2)
+    assert both["d"]["success"] or not both["d"]["planned_success"]
     rt = Retargeter(get_hand("shadow"), object_geometry("cube2"))
     F = rt.human_finger_forces(h)
     assert F.shape == (h.num_frames, len(rt.tip_sites), 3)

@@ -434,9 +434,9 @@ def test_cli_run_defaults_are_the_run_config_defaults():
     ref = RunConfig(hand="shadow", pair="cube2/tripod")
     assert cli == ref
     assert ref.refine_retries == RefineConfig().retries == 4
-    from retarget.calibrate import CalibrateConfig
+    from retarget.force_calibration import ForceCalibrationConfig
 
-    assert ref.calibrate_iterations == CalibrateConfig().iterations == 6
+    assert ref.calibrate_iterations == ForceCalibrationConfig().iterations == 6
 
 
 def test_cli_run_pair_missing_from_dataset(small_dataset, capsys):

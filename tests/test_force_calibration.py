@@ -1,5 +1,5 @@
 """Force calibration: servo commands corrected in simulation until the fingers press like the
-human's (``retarget.calibrate``)."""
+human's (``retarget.force_calibration``)."""
 
 from __future__ import annotations
 
@@ -11,8 +11,13 @@ import numpy as np
 import pytest
 from finger_scenes import finger_pressing_a_fixed_box
 
-from retarget.calibrate import CalibrateConfig, calibrate_forces, correction, force_error
 from retarget.errors import RetargetError
+from retarget.force_calibration import (
+    ForceCalibrationConfig,
+    calibrate_forces,
+    correction,
+    force_error,
+)
 from retarget.force_matching import squeeze_offsets
 
 
@@ -95,9 +100,9 @@ def test_force_error_is_the_pooled_relative_error_of_the_loaded_fingers():
     assert force_error(H, R) == pytest.approx(0.25)
     assert force_error(np.zeros((4, 2)), np.ones((4, 2))) is None
     with pytest.raises(RetargetError, match="gain"):
-        CalibrateConfig(gain=1.5).validate()
+        ForceCalibrationConfig(gain=1.5).validate()
     with pytest.raises(RetargetError, match="iterations"):
-        CalibrateConfig(iterations=-1).validate()
+        ForceCalibrationConfig(iterations=-1).validate()
 
 
 @pytest.fixture(scope="module")
@@ -131,7 +136,7 @@ def test_calibration_presses_closer_to_the_human_and_keeps_the_object(shadow_for
     rt, resim, robot, human = shadow_force_matched
     sim0 = resim.run(robot.q_command, human)
     assert sim0.success
-    cal = calibrate_forces(rt, resim, robot, human, sim0, CalibrateConfig(iterations=3))
+    cal = calibrate_forces(rt, resim, robot, human, sim0, ForceCalibrationConfig(iterations=3))
     its = cal.iterates
     assert len(its) == 4 and its[0].force_error is not None
     assert cal.success and its[cal.chosen].success
@@ -151,7 +156,7 @@ def test_calibration_presses_closer_to_the_human_and_keeps_the_object(shadow_for
     assert m["force_error_after"] == its[cal.chosen].force_error and m["compute_s"] > 0
     json.dumps(m)  # metrics.json-ready
     # zero iterations: the input, unchanged
-    same = calibrate_forces(rt, resim, robot, human, sim0, CalibrateConfig(iterations=0))
+    same = calibrate_forces(rt, resim, robot, human, sim0, ForceCalibrationConfig(iterations=0))
     assert same.chosen == 0 and np.array_equal(same.q_command, robot.q_command)
 
 

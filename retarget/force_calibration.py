@@ -34,7 +34,7 @@ from retarget.force_matching import servo_gains, squeeze_offsets
 
 
 @dataclass(frozen=True)
-class CalibrateConfig:
+class ForceCalibrationConfig:
     iterations: int = 6
     """Corrected iterates after the input commands' re-simulation (each costs one)."""
     gain: float = 0.5
@@ -44,7 +44,7 @@ class CalibrateConfig:
     tolerance_n: float = 0.02
     """Force errors [N] below this are left alone."""
 
-    def validate(self) -> CalibrateConfig:
+    def validate(self) -> ForceCalibrationConfig:
         if not (isinstance(self.iterations, int) and self.iterations >= 0):
             raise RetargetError(
                 f"calibration iterations must be an int >= 0, got {self.iterations}"
@@ -70,7 +70,7 @@ class Iterate:
 
 
 @dataclass
-class CalibrationResult:
+class ForceCalibrationResult:
     q_command: np.ndarray
     """(T, nq) the chosen iterate's servo commands."""
     sim: object
@@ -181,21 +181,61 @@ def correction(
     return out
 
 
+def iterate(simulate, step, cmd0, sim0, target, col, iterations: int, progress=None):
+    """The calibration loop, whatever the scene: ``(commands, simulations, iterates, chosen)``.
+
+    ``simulate(cmd)`` runs commands ``cmd`` and returns a result with ``success``,
+    ``first_failure_frame``, ``object_pos_err`` and ``finger_force_world`` ((T', P, 3), T' ≤
+    T frames, columns ``col`` the fingers of ``target`` (T, F, 3)); ``step(cmd, realized,
+    frames)`` returns the next commands from the realized forces (T, F, 3; zero past T') and
+    the frames to correct. ``sim0``: ``cmd0``'s result, if already run. The chosen iterate is
+    the successful one with the least :func:`force_error`, else 0."""
+    T = target.shape[0]
+    cmd, cmds, sims, its = cmd0, [], [], []
+    for k in range(iterations + 1):
+        if k > 0:
+            prev = sims[-1]
+            realized = np.zeros_like(target)
+            Tp = min(T, prev.finger_force_world.shape[0])
+            realized[:Tp] = prev.finger_force_world[:Tp, col]
+            frames = Tp if prev.first_failure_frame is None else prev.first_failure_frame
+            cmd = step(cmd, realized, min(frames, Tp))
+        s = sim0 if (k == 0 and sim0 is not None) else simulate(cmd)
+        Tk = min(T, s.finger_force_world.shape[0])
+        cmds.append(cmd)
+        sims.append(s)
+        its.append(
+            Iterate(
+                success=bool(s.success),
+                first_failure_frame=s.first_failure_frame,
+                object_pos_err_max_m=float(np.max(s.object_pos_err)),
+                force_error=force_error(target[:Tk], s.finger_force_world[:Tk, col]),
+            )
+        )
+        if progress is not None:
+            progress(k + 1, iterations + 1)
+    ok = [k for k, it in enumerate(its) if it.success]
+    chosen = min(
+        ok, default=0, key=lambda k: np.inf if its[k].force_error is None else its[k].force_error
+    )
+    return cmds, sims, its, chosen
+
+
 def calibrate_forces(
     retargeter,
     resimulator,
     robot,
     human,
     sim=None,
-    cfg: CalibrateConfig | None = None,
+    cfg: ForceCalibrationConfig | None = None,
     progress: Callable[[int, int], None] | None = None,
-) -> CalibrationResult:
+) -> ForceCalibrationResult:
     """Calibrate force-matched ``robot`` (a ``RobotTrajectory`` of ``human`` made by
     ``retargeter`` with ``force_matching``) in ``resimulator``'s scene (module doc).
 
     ``sim``: the input commands' re-simulation, when already run (it is iterate 0).
     Returns the chosen iterate and every iterate's success and force error."""
-    cfg = (cfg or CalibrateConfig()).validate()
+    cfg = (cfg or ForceCalibrationConfig()).validate()
     if robot.human_force is None:
         raise RetargetError(
             "force calibration matches the human's forces: retarget with force matching "
@@ -210,36 +250,22 @@ def calibrate_forces(
     target = retargeter.cfg.force_scale * np.asarray(robot.human_force, dtype=np.float64)
     n_smooth = max(1, round(cfg.smooth_s * human.fps))
     t0 = time.process_time()
-    q_cmd = np.asarray(robot.q_command, dtype=np.float64)
-    cmds, sims, its = [], [], []
-    for k in range(cfg.iterations + 1):
-        if k > 0:
-            prev = sims[-1]
-            dq = correction(
-                m, nq, robot.q, robot.tip_sites, target, prev.finger_force_world[:, col],
-                cfg.gain, n_smooth, cfg.tolerance_n, prev.first_failure_frame,
-            )  # fmt: skip
-            q_cmd = np.stack([retargeter._within_limits(x) for x in q_cmd + dq])
-        s = sim if (k == 0 and sim is not None) else resimulator.run(q_cmd, human)
-        cmds.append(q_cmd)
-        sims.append(s)
-        its.append(
-            Iterate(
-                success=bool(s.success),
-                first_failure_frame=s.first_failure_frame,
-                object_pos_err_max_m=float(s.object_pos_err.max()),
-                force_error=force_error(target, s.finger_force_world[:, col]),
-            )
-        )
-        if progress is not None:
-            progress(k + 1, cfg.iterations + 1)
-    ok = [k for k, it in enumerate(its) if it.success]
-    chosen = min(
-        ok, default=0, key=lambda k: np.inf if its[k].force_error is None else its[k].force_error
-    )
+
+    def step(q_cmd, realized, frames):
+        dq = correction(
+            m, nq, robot.q, robot.tip_sites, target, realized, cfg.gain, n_smooth,
+            cfg.tolerance_n, frames,
+        )  # fmt: skip
+        return np.stack([retargeter._within_limits(x) for x in q_cmd + dq])
+
+    cmds, sims, its, chosen = iterate(
+        lambda q_cmd: resimulator.run(q_cmd, human), step,
+        np.asarray(robot.q_command, dtype=np.float64), sim, target, col, cfg.iterations,
+        progress,
+    )  # fmt: skip
     fingers = np.isfinite(servo_gains(m, nq)[0])
     dev = np.abs(cmds[chosen] - cmds[0])[:, fingers]
-    return CalibrationResult(
+    return ForceCalibrationResult(
         q_command=cmds[chosen],
         sim=sims[chosen],
         chosen=chosen,
