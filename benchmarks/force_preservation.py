@@ -474,6 +474,22 @@ def _hand_job(args) -> list[dict]:
                     **{"contact_timeconst": FORCE_CONTACT_TIMECONST, **refine_overrides}
                 )
                 rf = refine(hand, geom, human, robot_d, retargeters["d"].tip_sites, rcfg)
+                if rf.success and n_calibrate > 0:
+                    from retarget.force_calibration import ForceCalibrationConfig
+                    from retarget.refine import calibrate_refined
+
+                    rf = calibrate_refined(
+                        hand, geom, human, robot_d, retargeters["d"].tip_sites, rf, rcfg,
+                        ForceCalibrationConfig(iterations=n_calibrate),
+                        retargeters["d"].cfg.force_scale,
+                    )  # fmt: skip
+                    cm = rf.calibration
+                    row.update(
+                        refine_calibration_iterate=cm["chosen_iterate"],
+                        refine_calibration_s=cm["compute_s"],
+                        refine_calibration_force_error_before=cm["force_error_before"],
+                        refine_calibration_force_error_after=cm["force_error_after"],
+                    )
                 rm = rf.metrics()
                 row.update(
                     success=rm["success"],

@@ -522,6 +522,18 @@ def run_retarget(cfg: RunConfig) -> dict:
             refined = refine(hand, geometry, traj, robot, retargeter.tip_sites, rcfg)
             if task is not None:
                 task(1, 1)
+            if refined.success and cfg.forces and cfg.calibrate_iterations > 0:
+                from retarget.force_calibration import ForceCalibrationConfig
+                from retarget.refine import calibrate_refined
+
+                n = cfg.calibrate_iterations
+                task = prog.task(f"calibrating the refined forces ({n} replays)", 1)
+                refined = calibrate_refined(
+                    hand, geometry, traj, robot, retargeter.tip_sites, refined, rcfg,
+                    ForceCalibrationConfig(iterations=n), retargeter.cfg.force_scale,
+                )  # fmt: skip
+                if task is not None:
+                    task(1, 1)
         metrics["refine"] = refined.metrics()
         metrics["success_refined"] = refined.success
         if cfg.forces:
@@ -696,7 +708,13 @@ def _print_summary(m: dict, out_dir: Path) -> None:
             f"{ok}: object error max {100 * r['object_pos_err_max_m']:.1f} cm; commands moved "
             f"{np.degrees(r['finger_ctrl_deviation_mean_rad']):.1f}° (fingers), "
             f"{1000 * r['wrist_pos_deviation_mean_m']:.1f} mm (wrist); "
-            f"{r['attempts']} attempt{'s' if r['attempts'] > 1 else ''}, {r['compute_s']:.1f} s",
+            f"{r['attempts']} attempt{'s' if r['attempts'] > 1 else ''}, {r['compute_s']:.1f} s"
+            + (
+                f"; force calibration: iterate {c['chosen_iterate']}, force error "
+                f"{_num(c['force_error_before'])} → {_num(c['force_error_after'])}"
+                if (c := r.get("calibration"))
+                else ""
+            ),
         )
         if r.get("forces"):
             rf = r["forces"]
