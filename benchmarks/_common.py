@@ -223,10 +223,15 @@ def resim_result(sim, q, traj) -> tuple[dict, object]:
         res = sim.run(q, traj)
     except RetargetError as e:  # a diverged simulation is a failed rollout
         return {**out, "success": False, "success_loose": False, "sim_error": str(e)}, None
+    return {**out, **sim_metrics(res)}, res
+
+
+def sim_metrics(res) -> dict:
+    """A ``ValidationResult``'s metrics for a row: its penetration is the simulated one
+    (``sim_penetration_max_m``; the row's ``penetration_max_m`` is the kinematic one)."""
     m = res.metrics()
-    # Its penetration is the simulated one; the row's penetration_max_m is the kinematic one.
     m["sim_penetration_max_m"] = m.pop("penetration_max_m")
-    return {**out, **m}, res
+    return m
 
 
 # ----------------------------------------------------------------------- terminal, records

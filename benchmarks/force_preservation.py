@@ -127,6 +127,8 @@ from _common import (
     parse_override,
     progress_bar,
     resim_result,
+    sim_metrics,
+    table_penetration,
     versions,
 )
 from force_pipeline import _init_worker, _one_thread_env
@@ -355,9 +357,9 @@ def _calibrated(rt, resim, robot, human, sim, m: dict, n: int) -> tuple[dict, ob
 
     cal = calibrate_forces(rt, resim, robot, human, sim, ForceCalibrationConfig(iterations=n))
     cm = cal.metrics()
-    out = {**m, **cal.sim.metrics()}
-    out["sim_penetration_max_m"] = out.pop("penetration_max_m")
+    out = {**m, **sim_metrics(cal.sim)}
     out.update(
+        table_penetration_max_m=table_penetration(resim, cal.commands),
         planned_success=m["success"],
         planned_object_pos_err_max_m=m["object_pos_err_max_m"],
         calibration_iterate=cm["chosen_iterate"],
@@ -366,7 +368,7 @@ def _calibrated(rt, resim, robot, human, sim, m: dict, n: int) -> tuple[dict, ob
         calibration_force_error_after=cm["force_error_after"],
         calibration_finger_cmd_deviation_mean_rad=cm["finger_cmd_deviation_mean_rad"],
     )
-    robot.q_command = cal.q_command
+    robot.q_command = cal.commands
     return out, cal.sim
 
 

@@ -71,15 +71,16 @@ class Iterate:
 
 @dataclass
 class ForceCalibrationResult:
-    q_command: np.ndarray
-    """(T, nq) the chosen iterate's servo commands."""
+    commands: np.ndarray
+    """The chosen iterate's servo commands: (T, nq) joint targets (:func:`calibrate_forces`)
+    or (T, nu) actuator targets (``refine.calibrate_refined``)."""
     sim: object
-    """Its re-simulation (``ValidationResult``)."""
+    """Its simulation (``ValidationResult``; the refinement scene's replay, or its rollout)."""
     chosen: int
     """Index of the chosen iterate in ``iterates`` (0: the input commands)."""
     iterates: list[Iterate] = field(default_factory=list)
     finger_cmd_deviation_rad: float = 0.0
-    """Mean ``|Δ|`` of the finger joints' commands from the input ones, over every frame."""
+    """Mean ``|Δ|`` of the fingers' commands from the input ones, over every frame."""
     compute_s: float = 0.0
     """CPU time of the re-simulations and corrections [s]."""
 
@@ -99,6 +100,17 @@ class ForceCalibrationResult:
             "finger_cmd_deviation_mean_rad": self.finger_cmd_deviation_rad,
             "compute_s": self.compute_s,
         }
+
+
+def human_target(robot, force_scale: float = 1.0) -> np.ndarray:
+    """(T, F, 3) [N]: the forces calibration presses towards, ``force_scale`` × the human's per
+    finger (``robot.human_force``, set by force matching)."""
+    if robot.human_force is None:
+        raise RetargetError(
+            "force calibration matches the human's forces: retarget with force matching "
+            "(retarget run --forces) first"
+        )
+    return force_scale * np.asarray(robot.human_force, dtype=np.float64)
 
 
 def force_error(H: np.ndarray, R: np.ndarray) -> float | None:
@@ -181,15 +193,19 @@ def correction(
     return out
 
 
-def iterate(simulate, step, cmd0, sim0, target, col, iterations: int, progress=None):
-    """The calibration loop, whatever the scene: ``(commands, simulations, iterates, chosen)``.
+def calibrate(
+    simulate, step, cmd0, sim0, target, col, iterations: int, servoed, progress=None
+) -> ForceCalibrationResult:
+    """The calibration loop, whatever the scene (module doc).
 
     ``simulate(cmd)`` runs commands ``cmd`` and returns a result with ``success``,
     ``first_failure_frame``, ``object_pos_err`` and ``finger_force_world`` ((T', P, 3), T' ≤
     T frames, columns ``col`` the fingers of ``target`` (T, F, 3)); ``step(cmd, realized,
     frames)`` returns the next commands from the realized forces (T, F, 3; zero past T') and
-    the frames to correct. ``sim0``: ``cmd0``'s result, if already run. The chosen iterate is
+    the frames to correct. ``sim0``: ``cmd0``'s result, if already run. ``servoed``: the
+    command columns of the fingers' servos (the reported deviation). The chosen iterate is
     the successful one with the least :func:`force_error`, else 0."""
+    t0 = time.process_time()
     T = target.shape[0]
     cmd, cmds, sims, its = cmd0, [], [], []
     for k in range(iterations + 1):
@@ -218,7 +234,15 @@ def iterate(simulate, step, cmd0, sim0, target, col, iterations: int, progress=N
     chosen = min(
         ok, default=0, key=lambda k: np.inf if its[k].force_error is None else its[k].force_error
     )
-    return cmds, sims, its, chosen
+    dev = np.abs(cmds[chosen] - cmds[0])[:, servoed]
+    return ForceCalibrationResult(
+        commands=cmds[chosen],
+        sim=sims[chosen],
+        chosen=chosen,
+        iterates=its,
+        finger_cmd_deviation_rad=float(dev.mean()) if dev.size else 0.0,
+        compute_s=time.process_time() - t0,
+    )
 
 
 def calibrate_forces(
@@ -236,20 +260,14 @@ def calibrate_forces(
     ``sim``: the input commands' re-simulation, when already run (it is iterate 0).
     Returns the chosen iterate and every iterate's success and force error."""
     cfg = (cfg or ForceCalibrationConfig()).validate()
-    if robot.human_force is None:
-        raise RetargetError(
-            "force calibration matches the human's forces: retarget with force matching "
-            "(retarget run --forces) first"
-        )
+    target = human_target(robot, retargeter.cfg.force_scale)
     m, nq = resimulator.model, resimulator.hand_nq
     if robot.q.shape[1] != nq:
         raise RetargetError(
             f"force calibration: trajectory has {robot.q.shape[1]} joints, the scene {nq}"
         )
     col = [resimulator.fingers.index(retargeter.hand.fingers[f]) for f in retargeter.tip_human]
-    target = retargeter.cfg.force_scale * np.asarray(robot.human_force, dtype=np.float64)
     n_smooth = max(1, round(cfg.smooth_s * human.fps))
-    t0 = time.process_time()
 
     def step(q_cmd, realized, frames):
         dq = correction(
@@ -258,18 +276,8 @@ def calibrate_forces(
         )  # fmt: skip
         return np.stack([retargeter._within_limits(x) for x in q_cmd + dq])
 
-    cmds, sims, its, chosen = iterate(
+    return calibrate(
         lambda q_cmd: resimulator.run(q_cmd, human), step,
         np.asarray(robot.q_command, dtype=np.float64), sim, target, col, cfg.iterations,
-        progress,
+        np.isfinite(servo_gains(m, nq)[0]), progress,
     )  # fmt: skip
-    fingers = np.isfinite(servo_gains(m, nq)[0])
-    dev = np.abs(cmds[chosen] - cmds[0])[:, fingers]
-    return ForceCalibrationResult(
-        q_command=cmds[chosen],
-        sim=sims[chosen],
-        chosen=chosen,
-        iterates=its,
-        finger_cmd_deviation_rad=float(dev.mean()) if dev.size else 0.0,
-        compute_s=time.process_time() - t0,
-    )

@@ -316,23 +316,21 @@ def calibrate_refined(
     (its ``compute_s`` added). ``cfg``: the refinement's configuration (its scene)."""
     from types import SimpleNamespace
 
-    from retarget.force_calibration import ForceCalibrationConfig, correction, iterate
+    from retarget.force_calibration import (
+        ForceCalibrationConfig,
+        calibrate,
+        correction,
+        human_target,
+    )
 
     cfg = RefineConfig() if cfg is None else cfg
     ccfg = (calibration or ForceCalibrationConfig()).validate()
-    if robot.human_force is None:
-        raise RetargetError(
-            "force calibration matches the human's forces: retarget with force matching "
-            "(retarget run --forces) first"
-        )
-    t0 = time.process_time()
+    target = human_target(robot, force_scale)
     env, act_q, _ = _tracking_env(hand, geometry, human, robot, tip_sites, cfg)
     m, T, nq = env.scene.model, human.num_frames, robot.q.shape[1]
     fingers = list(hand.robot_fingers)
     col = [fingers.index(hand.fingers[f]) for f in _human_fingers(hand, tip_sites)]
-    target = force_scale * np.asarray(robot.human_force, dtype=np.float64)
     n_smooth = max(1, round(ccfg.smooth_s * human.fps))
-    lo, hi = env.ctrl_low, env.ctrl_high
 
     def simulate(ctrl):
         env.ctrl_ref = ctrl
@@ -351,40 +349,29 @@ def calibrate_refined(
             m, nq, robot.q, tip_sites, target, realized, ccfg.gain, n_smooth, ccfg.tolerance_n,
             frames,
         )  # fmt: skip
-        return np.clip(ctrl + dq[:, act_q], lo, hi)
+        return np.clip(ctrl + dq[:, act_q], env.ctrl_low, env.ctrl_high)
 
-    sim0 = SimpleNamespace(
+    rollout = SimpleNamespace(  # iterate 0: the refinement's own rollout
         success=refined.success, first_failure_frame=refined.failed_at_frame,
         object_pos_err=refined.object_pos_err, object_rot_err=refined.object_rot_err,
         finger_force_world=refined.finger_force_world,
     )  # fmt: skip
-    cmds, sims, its, k = iterate(simulate, step, refined.ctrl, sim0, target, col, ccfg.iterations)
-    fingers_act = [a for a in range(m.nu) if act_q[a] >= 6]
-    dev = np.abs(cmds[k] - cmds[0])[:, fingers_act]
-    cpu = time.process_time() - t0
-    best = its[k]
-    metrics = {
-        "success": bool(best.success),
-        "chosen_iterate": k,
-        "iterates": [vars(it).copy() for it in its],
-        "force_error_before": its[0].force_error,
-        "force_error_after": best.force_error,
-        "finger_cmd_deviation_mean_rad": float(dev.mean()) if dev.size else 0.0,
-        "compute_s": cpu,
-    }
-    s = sims[k]
-    ref_dev = np.abs(cmds[k] - refined.ctrl_reference[: len(cmds[k])])[:, fingers_act]
+    finger_acts = act_q >= 6
+    n = ccfg.iterations
+    cal = calibrate(simulate, step, refined.ctrl, rollout, target, col, n, finger_acts)
+    s = cal.sim
+    ref_dev = np.abs(cal.commands - refined.ctrl_reference[: len(cal.commands)])[:, finger_acts]
     return replace(
         refined,
         finger_ctrl_deviation_rad=float(ref_dev.mean()) if ref_dev.size else 0.0,
-        success=bool(best.success),
+        success=cal.success,
         failed_at_frame=s.first_failure_frame,
         object_pos_err=np.asarray(s.object_pos_err),
         object_rot_err=np.asarray(s.object_rot_err),
-        ctrl=np.asarray(cmds[k]),
+        ctrl=np.asarray(cal.commands),
         finger_force_world=s.finger_force_world,
-        compute_s=refined.compute_s + cpu,
-        calibration=metrics,
+        compute_s=refined.compute_s + cal.compute_s,
+        calibration=cal.metrics(),
     )
 
 

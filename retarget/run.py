@@ -468,7 +468,7 @@ def run_retarget(cfg: RunConfig) -> dict:
                 progress=prog.task(f"calibrating forces ({n} re-simulations)", n + 1),
             )  # fmt: skip
             sim, planned = calibrated.sim, robot.q_command
-            robot.q_command = calibrated.q_command
+            robot.q_command = calibrated.commands
 
     kin_pen = (
         float(max(0.0, -np.min(robot.min_distance)))

@@ -146,18 +146,18 @@ def test_calibration_presses_closer_to_the_human_and_keeps_the_object(shadow_for
     before = force_metrics(robot, sim0, human, rt)["force_profile_correlation_mean"]
     after = force_metrics(robot, cal.sim, human, rt)["force_profile_correlation_mean"]
     assert after >= before - 0.01
-    again = resim.run(cal.q_command, human)
+    again = resim.run(cal.commands, human)
     np.testing.assert_allclose(again.finger_force_world, cal.sim.finger_force_world)
-    assert cal.q_command.shape == robot.q_command.shape
+    assert cal.commands.shape == robot.q_command.shape
     wrist = slice(0, 6)
-    np.testing.assert_array_equal(cal.q_command[:, wrist], robot.q_command[:, wrist])
+    np.testing.assert_array_equal(cal.commands[:, wrist], robot.q_command[:, wrist])
     assert 0 < cal.finger_cmd_deviation_rad < 0.1
     m = cal.metrics()
     assert m["force_error_after"] == its[cal.chosen].force_error and m["compute_s"] > 0
     json.dumps(m)  # metrics.json-ready
     # zero iterations: the input, unchanged
     same = calibrate_forces(rt, resim, robot, human, sim0, ForceCalibrationConfig(iterations=0))
-    assert same.chosen == 0 and np.array_equal(same.q_command, robot.q_command)
+    assert same.chosen == 0 and np.array_equal(same.commands, robot.q_command)
 
 
 def test_calibration_needs_a_force_matched_trajectory(shadow_force_matched):
