@@ -326,6 +326,7 @@ def _baseline(hand_name: str, wrist: str):
 FORCE_KEYS = (
     "force_per_finger", "force_correlation_mean", "force_profile_correlation_mean",
     "force_correlation_mean_load_bearing", "force_profile_correlation_mean_load_bearing",
+    "force_profile_correlation_mean_reached", "fingers_reached", "fingers_scored",
     "object_force_error_mean_n", "object_force_error_contact_frames_mean_n",
     "object_force_error_pct_weight", "contact_precision", "contact_recall",
 )  # fmt: skip
@@ -586,6 +587,9 @@ def aggregate(rows: list[dict]) -> dict:
         "force_profile_correlation_mean_load_bearing_successful": _mean(
             won, "force_profile_correlation_mean_load_bearing"
         ),
+        "force_profile_correlation_mean_reached_successful": _mean(
+            won, "force_profile_correlation_mean_reached"
+        ),
         "object_force_error_mean_n": _mean(ok, "object_force_error_mean_n"),
         "object_force_error_pct_weight": _mean(ok, "object_force_error_pct_weight"),
         "object_force_error_mean_n_successful": _mean(won, "object_force_error_mean_n"),
@@ -690,7 +694,8 @@ def replay_record(first, res: dict) -> dict:
 
 CORRELATION_KEYS = ("force_profile_correlation_mean", "force_correlation_mean",
                     "force_profile_correlation_mean_load_bearing",
-                    "force_correlation_mean_load_bearing")  # fmt: skip
+                    "force_correlation_mean_load_bearing",
+                    "force_profile_correlation_mean_reached")  # fmt: skip
 
 
 def replay_ceiling(rows: list[dict], human: list[dict], variant: str = "d") -> dict:
@@ -721,15 +726,70 @@ def replay_ceiling(rows: list[dict], human: list[dict], variant: str = "d") -> d
         ]
         if not scored:
             continue
-        ceiling.append(correlation_means(
-            {f: {**rep_per[f], "load_share": per[f]["load_share"]} for f in scored}
-        ))  # fmt: skip
+        ceiling.append(correlation_means({
+            f: {**rep_per[f], **{k: per[f][k] for k in ("load_share", "contact_reach_m")
+                                 if k in per[f]}}
+            for f in scored
+        }))  # fmt: skip
         ours.append({k: r.get(k) for k in CORRELATION_KEYS})
 
     def mean(ms: list[dict]) -> dict:
         return {k: _mean(ms, k) for k in CORRELATION_KEYS}
 
     return {"variant": variant, "runs": len(ours), "replay": mean(ceiling), "ours": mean(ours)}
+
+
+REACH_BINS_M = (0.003, 0.005, 0.010, 0.020)
+"""Upper edges of the reach bins of :func:`correlation_by_reach` (the last bin is open)."""
+
+
+def _bins(edges_m: tuple[float, ...]) -> list[tuple[str, float, float]]:
+    edges = (0.0, *edges_m, np.inf)
+    return [
+        (f"{1e3 * lo:.0f}–{1e3 * hi:.0f} mm" if np.isfinite(hi) else f"> {1e3 * lo:.0f} mm", lo, hi)
+        for lo, hi in itertools.pairwise(edges)
+    ]
+
+
+def correlation_by_reach(rows: list[dict], human: list[dict]) -> dict:
+    """Whole-clip force correlation of single fingers, (d) and (e)'s successful runs pooled
+    finger by finger, binned by how close the kinematic plan brings the finger to the human's
+    contact (``contact_reach_m``, :data:`retarget.run.REACH_M`), next to the human replay's on
+    the same fingers where the run has one. Fingers without a reach (no contact target where
+    the human loads) are their own bin. ``{variant: [{"bin", "fingers", "correlation",
+    "replay_fingers", "replay_correlation"}]}``."""
+    replays = {
+        (h["index"], h["object_id"]): h["replay"]["force_per_finger"]
+        for h in human
+        if "force_per_finger" in h.get("replay", {})
+    }
+    out = {}
+    for v in ("d", "e"):
+        fingers = []  # (reach, ours, replay)
+        for r in rows:
+            if r["variant"] != v or "skipped" in r or "error" in r or not r.get("success"):
+                continue
+            rep = replays.get((r["index"], r["object_id"]), {})
+            for f, x in (r.get("force_per_finger") or {}).items():
+                if x.get("profile_correlation") is None or "contact_reach_m" not in x:
+                    continue
+                reach = x["contact_reach_m"]
+                fingers.append((
+                    np.inf if reach is None else reach, x["profile_correlation"],
+                    rep.get(f, {}).get("profile_correlation"),
+                ))  # fmt: skip
+        out[v] = []
+        for lab, lo, hi in [*_bins(REACH_BINS_M), ("no target", np.inf, np.inf)]:
+            sel = [f for f in fingers if (lo <= f[0] < hi) or (lo == hi == f[0])]
+            reps = [f[2] for f in sel if f[2] is not None]
+            out[v].append({
+                "bin": lab,
+                "fingers": len(sel),
+                "correlation": float(np.mean([f[1] for f in sel])) if sel else None,
+                "replay_fingers": len(reps),
+                "replay_correlation": float(np.mean(reps)) if reps else None,
+            })  # fmt: skip
+    return out
 
 
 CONTACT_ERROR_BINS_M = (0.002, 0.005, 0.010)
@@ -747,17 +807,12 @@ def by_contact_error(rows: list[dict]) -> dict:
         for r in rows
         if r["variant"] == "d" and "skipped" not in r and "error" not in r
     }
-    edges = (0.0, *CONTACT_ERROR_BINS_M, np.inf)
-    labels = [
-        f"{1e3 * lo:.0f}–{1e3 * hi:.0f} mm" if np.isfinite(hi) else f"> {1e3 * lo:.0f} mm"
-        for lo, hi in itertools.pairwise(edges)
-    ]
     out = {}
     for v in ("c", "d", "e"):
         rs = [r for r in rows if r["variant"] == v and "skipped" not in r]
         err = [ref.get((r["hand"], r["index"], r["object_id"])) for r in rs]
         out[v] = []
-        for lab, (lo, hi) in zip(labels, itertools.pairwise(edges), strict=True):
+        for lab, lo, hi in _bins(CONTACT_ERROR_BINS_M):
             sel = [r for r, e in zip(rs, err, strict=True) if e is not None and lo <= e < hi]
             out[v].append({"bin": lab, "runs": len(sel), "success_rate": _rate(sel)})
     return out
@@ -822,24 +877,47 @@ def wrench_table(scope: str, table: dict):
     return t
 
 
-def contact_error_table(scope: str, table: dict):
+def _binned_table(title: str, caption: str, what: str, table: dict, columns, cells):
+    """A table with a row per bin of ``table[v]`` (lists of bins per variant, the same bins):
+    ``columns`` the header after ``what``, ``cells(bins)`` a row's cells (``bins[v]``)."""
     from rich.table import Table
 
-    t = Table(
-        title=f"{scope}: strict success % by kinematic contact error (runs)",
-        caption="contact error: mean distance from each contacting robot link to the human's "
-        "contact point in (d)'s retargeting",
-    )
-    t.add_column("contact error", no_wrap=True)
-    for v in ("c", "d", "e"):
-        t.add_column(LABELS[v], justify="right", no_wrap=True)
-    for k, row in enumerate(table["d"]):
-        cells = []
-        for v in ("c", "d", "e"):
-            b = table[v][k]
-            cells.append(f"{_f(b['success_rate'], 100, '.0f')} ({b['runs']})")
-        t.add_row(row["bin"], *cells)
+    t = Table(title=title, caption=caption)
+    t.add_column(what, no_wrap=True)
+    for c in columns:
+        t.add_column(c, justify="right", no_wrap=True)
+    first = next(iter(table.values()))
+    for k, row in enumerate(first):
+        t.add_row(row["bin"], *cells({v: bins[k] for v, bins in table.items()}))
     return t
+
+
+def contact_error_table(scope: str, table: dict):
+    return _binned_table(
+        f"{scope}: strict success % by kinematic contact error (runs)",
+        "contact error: mean distance from each contacting robot link to the human's contact "
+        "point in (d)'s retargeting",
+        "contact error",
+        table,
+        [LABELS[v] for v in ("c", "d", "e")],
+        lambda b: [f"{_f(b[v]['success_rate'], 100, '.0f')} ({b[v]['runs']})" for v in "cde"],
+    )
+
+
+def reach_table(scope: str, table: dict):
+    return _binned_table(
+        f"{scope}: force correlation by the finger's reach (fingers; successful runs)",
+        "reach: median distance from the robot finger to the human's contact point in (d)'s "
+        "plan over the frames the human finger loads; whole-clip correlation per finger",
+        "reach",
+        table,
+        [LABELS["d"], "human replay", LABELS["e"], "human replay"],
+        lambda b: [
+            f"{_f(b[v][k], fmt='.2f')} ({b[v][n]})"
+            for v in "de"
+            for k, n in (("correlation", "fingers"), ("replay_correlation", "replay_fingers"))
+        ],
+    )
 
 
 def target_checks(
@@ -923,6 +1001,7 @@ def target_checks(
             "runs, whole demonstration)",
             "value": profile,
             "met": at_least(profile, TARGET_CORRELATION),
+            "reached_fingers_value": d["force_profile_correlation_mean_reached_successful"],
             **replay("d", "force_profile_correlation_mean"),
         },
         {
@@ -1156,6 +1235,8 @@ def targets_table(scope: str, checks: list[dict]):
                 s += f", {a / b:.1f}×"
         elif c["name"] == "correlation":
             s = _f(v, fmt=".2f")
+            if c.get("reached_fingers_value") is not None:
+                s += f"; fingers reaching the human's contacts {c['reached_fingers_value']:.2f}"
             if c.get("human_replay_runs"):
                 s += (
                     f" (same {c['human_replay_runs']} runs: {_f(c['same_runs'], fmt='.2f')}; "
@@ -1505,6 +1586,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
     scope_aggs = {s: aggregate_variants(rs) for s, rs in scopes.items()}
     hv = {s: heavy_vs_light(rs) for s, rs in scopes.items()}
     by_contact = {s: by_contact_error(rs) for s, rs in scopes.items()}
+    by_reach = {s: correlation_by_reach(rs, human) for s, rs in scopes.items()}
     by_wrench = {s: heavy_vs_light_by_wrench(rs) for s, rs in scopes.items()}
     target_scope = FIVE_FINGER if five else ALL_HANDS
     ceilings = per_hand_ceiling = None
@@ -1550,6 +1632,8 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         if s_ == ALL_HANDS and len(hands) == 1:
             continue
         console.print(contact_error_table(s_, tab))
+        if "d" in cfg.computed_variants():
+            console.print(reach_table(s_, by_reach[s_]))
     console.print(targets_table(target_scope, checks))
 
     plot_ceilings = None
@@ -1615,6 +1699,10 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
             "demonstration (the force profile, contact on/off timing included)",
             "*_load_bearing": "the same means over the fingers whose mean human force is at "
             "least retarget.run.LOAD_BEARING_SHARE of the mapped fingers' summed mean force",
+            "force_profile_correlation_mean_reached": "the whole-clip mean over the fingers "
+            "whose contact_reach_m (the median distance from the robot finger to the human's "
+            "contact point in (d)'s plan, over the frames the human finger loads) is at most "
+            "retarget.run.REACH_M; correlation_by_reach pools single fingers by reach",
             "object_force_error_mean_n": "mean over frames where the human touches of |sum of "
             "robot contact forces - sum of human contact forces| on the object (force part of "
             "the wrench; no torque: the re-simulation reports no contact points)",
@@ -1649,6 +1737,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
             "heavy_vs_light_by_wrench": by_wrench,
             "human_heavy_vs_light": human_hv,
             "by_contact_error": by_contact,
+            "correlation_by_reach": by_reach,
             "human_replay_ceiling": None
             if ceilings is None
             else {"per_scope": ceilings, "per_hand": per_hand_ceiling},

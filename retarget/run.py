@@ -211,6 +211,16 @@ def _corr(a: np.ndarray, b: np.ndarray) -> float | None:
     return float(np.corrcoef(a, b)[0, 1])
 
 
+REACH_M = 0.005
+"""A force-matched finger *reaches* the human's contact when the kinematic plan keeps it within
+this distance [m] of the human's contact point (median over the frames the human finger
+loads; ``finger_force_profiles``' ``contact_reach_m``). Measured 2026-12-06 on the
+force-preservation benchmark's five-finger (d) runs that kept the object (222 scored
+fingers, fp_cal2 at 7e2995d): fingers within 3 mm correlate with the human's profile at
+0.83 (72 fingers; the human replay on the same fingers 0.84), 3–5 mm 0.83 (40; 0.83), 5–10
+mm 0.70 (62; 0.78), 10–20 mm 0.83 (35; 0.91), beyond 0.58 (9; 0.96): past 5 mm the
+robot's correlation falls behind the replay's (README, force preservation)."""
+
 LOAD_BEARING_SHARE = 0.1
 """A human finger is *load-bearing* when its mean force over the demonstration is at least this
 share of the summed mean force of the fingers the robot maps (``force_metrics``'s
@@ -225,14 +235,22 @@ same runs and fingers, 2026-12-06) reproduces its own load-bearing profiles at 0
 touches at 0.47."""
 
 
-def finger_force_profiles(H: np.ndarray, R: np.ndarray, fingers) -> dict:
+def finger_force_profiles(
+    H: np.ndarray, R: np.ndarray, fingers, reach: np.ndarray | None = None
+) -> dict:
     """Per finger, how the contact-force magnitudes ``R`` (T, F) [N] reproduce the reference
     ``H`` (T, F) [N] (columns named by ``fingers``): ``correlation`` over the frames where
     either exceeds 0.05 N, ``profile_correlation`` over every frame, ``relative_magnitude_error``
     (Σ|r − h| / Σh over the frames the reference carries force), both mean forces and the
     finger's ``load_share`` of the reference's summed mean force. A finger the reference never
     loads (0.05 N on at most 2 frames) has no profile to match: its three scores are ``None``;
-    a reproduction that never presses where it does scores 0 (``_corr``)."""
+    a reproduction that never presses where it does scores 0 (``_corr``).
+
+    ``reach`` (T, F) [m], optional: the kinematic plan's distance from each robot finger to the
+    human's contact point (``RobotTrajectory.contact_err``, NaN where inactive); each scored
+    finger then also gets ``contact_reach_m``, its median over the frames the reference loads
+    (``None`` when the plan has no contact target there). A finger the plan cannot bring onto
+    the human's contact presses elsewhere or nowhere: ``REACH_M``."""
     H = np.asarray(H, dtype=np.float64)
     R = np.asarray(R, dtype=np.float64)
     if H.ndim != 2 or H.shape != R.shape or H.shape[1] != len(fingers):
@@ -240,6 +258,8 @@ def finger_force_profiles(H: np.ndarray, R: np.ndarray, fingers) -> dict:
             f"force profiles: reference {H.shape} and reproduction {R.shape} must both be "
             f"(frames, {len(fingers)} fingers)"
         )
+    if reach is not None and np.shape(reach) != H.shape:
+        raise RetargetError(f"force profiles: reach {np.shape(reach)} must be {H.shape}")
     per = {}
     total = float(H.mean(axis=0).sum())
     for i, f in enumerate(fingers):
@@ -257,27 +277,47 @@ def finger_force_profiles(H: np.ndarray, R: np.ndarray, fingers) -> dict:
             "robot_force_mean_n": float(r.mean()),
             "load_share": hm / total if total > 0 else None,
         }
+        if reach is not None and used:
+            d = np.asarray(reach, dtype=np.float64)[held, i]
+            d = d[np.isfinite(d)]
+            per[f]["contact_reach_m"] = float(np.median(d)) if d.size else None
     return per
 
 
 def correlation_means(per: dict) -> dict:
     """The four means of :func:`finger_force_profiles`' correlations over the scored fingers
-    (all, and the load-bearing ones: ``LOAD_BEARING_SHARE``); ``None`` where none is scored."""
+    (all, and the load-bearing ones: ``LOAD_BEARING_SHARE``); ``None`` where none is scored.
+    When the fingers carry ``contact_reach_m``, also the whole-clip mean over those whose plan
+    reaches the human's contact (``REACH_M``; ``force_profile_correlation_mean_reached``) and
+    how many of the scored fingers do (``fingers_reached``, of ``fingers_scored``)."""
 
-    def mean_of(key: str, load_bearing: bool = False) -> float | None:
-        vals = [
-            v[key]
-            for v in per.values()
-            if v[key] is not None and (not load_bearing or v["load_share"] >= LOAD_BEARING_SHARE)
-        ]
+    def mean_of(key: str, keep=lambda v: True) -> float | None:
+        vals = [v[key] for v in per.values() if v[key] is not None and keep(v)]
         return float(np.mean(vals)) if vals else None
 
-    return {
+    def load_bearing(v: dict) -> bool:
+        return v["load_share"] >= LOAD_BEARING_SHARE
+
+    out = {
         "force_correlation_mean": mean_of("correlation"),
         "force_profile_correlation_mean": mean_of("profile_correlation"),
-        "force_correlation_mean_load_bearing": mean_of("correlation", True),
-        "force_profile_correlation_mean_load_bearing": mean_of("profile_correlation", True),
+        "force_correlation_mean_load_bearing": mean_of("correlation", load_bearing),
+        "force_profile_correlation_mean_load_bearing": mean_of("profile_correlation", load_bearing),
     }
+    scored = [v for v in per.values() if v["profile_correlation"] is not None]
+    if any("contact_reach_m" in v for v in scored):
+        reached = [v for v in scored if reaches(v)]
+        out["force_profile_correlation_mean_reached"] = mean_of("profile_correlation", reaches)
+        out["fingers_reached"] = len(reached)
+        out["fingers_scored"] = len(scored)
+    return out
+
+
+def reaches(finger: dict) -> bool:
+    """Whether a scored finger's plan reaches the human's contact (``contact_reach_m`` ≤
+    ``REACH_M``; a finger without one does not)."""
+    d = finger.get("contact_reach_m")
+    return d is not None and d <= REACH_M
 
 
 def human_replay_metrics(first, second, fingers=None) -> dict:
@@ -336,7 +376,8 @@ def force_metrics(robot, sim, human, retargeter) -> dict:
     # the robot finger each human finger drives (a gripper merges index and middle)
     col = [sim.fingers.index(retargeter.hand.fingers[f]) for f in retargeter.tip_human]
     R = np.linalg.norm(sim.finger_force_world[:, col], axis=2)
-    per = finger_force_profiles(H, R, retargeter.tip_human)
+    # a robot without a contact plan (a baseline's replay scored by the benchmark) has no reach
+    per = finger_force_profiles(H, R, retargeter.tip_human, getattr(robot, "contact_err", None))
     human_total = human.contacts.finger_totals()[:, : len(FORCE_GROUPS)].sum(axis=1)
     robot_total = sim.finger_force_world.sum(axis=1)
     touch = np.linalg.norm(human_total, axis=1) > 0.05
@@ -376,7 +417,9 @@ def refined_force_metrics(robot, refined, human, retargeter) -> dict | None:
     if Tt < 3:
         return None
     part = SimpleNamespace(
-        human_force=robot.human_force[:Tt], wrench_shortfall=robot.wrench_shortfall[:Tt]
+        human_force=robot.human_force[:Tt],
+        wrench_shortfall=robot.wrench_shortfall[:Tt],
+        contact_err=robot.contact_err[:Tt],
     )
     sim = SimpleNamespace(finger_force_world=refined.finger_force_world, fingers=refined.fingers)
     human_t = human if Tt == human.num_frames else human.slice(0, Tt)
@@ -676,7 +719,14 @@ def _print_summary(m: dict, out_dir: Path) -> None:
             f"{_num(m['force_correlation_mean'])} (contact frames); load-bearing fingers "
             f"{_num(m['force_profile_correlation_mean_load_bearing'])}; object force error "
             f"{_num(m['object_force_error_mean_n'])} N, wrench feasible "
-            f"{100 * m['wrench_feasible_fraction']:.0f} % of contact frames",
+            f"{100 * m['wrench_feasible_fraction']:.0f} % of contact frames"
+            + (
+                f"; {m['fingers_reached']} of {m['fingers_scored']} fingers reach the human's "
+                f"contacts (≤ {1000 * REACH_M:.0f} mm), correlation "
+                f"{_num(m['force_profile_correlation_mean_reached'])}"
+                if "fingers_reached" in m
+                else ""
+            ),
         )
     if (hr := m.get("human_replay")) is not None:
         if hr["success"]:

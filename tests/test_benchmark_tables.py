@@ -6,13 +6,17 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import pytest
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
 from force_preservation import (
     WRENCH_FEASIBLE,
     by_contact_error,
     contact_error_table,
+    correlation_by_reach,
     heavy_vs_light_by_wrench,
+    reach_table,
     wrench_table,
 )
 
@@ -113,3 +117,44 @@ def test_speed_target_reports_the_ratio_to_dex_retargeting():
     console = Console(width=150, record=True)
     console.print(targets_table(checks))
     assert "0.600 ms (0.30× dex-retargeting's 2.000)" in console.export_text()
+
+
+def test_fingers_are_pooled_by_reach_with_the_human_replay_on_the_same_fingers():
+    """Single fingers of successful (d) / (e) runs, binned by ``contact_reach_m``; the human
+    replay's correlation of the same finger beside them; failed runs, fingers without a profile
+    or without a reach (a baseline's) left out; no contact target: its own bin."""
+
+    def finger(corr, reach="absent"):
+        f = {"profile_correlation": corr}
+        if reach != "absent":
+            f["contact_reach_m"] = reach
+        return f
+
+    rows = [
+        _row("d", 0, True, force_per_finger={
+            "thumb": finger(0.9, 0.001), "index": finger(0.5, 0.007), "ring": finger(0.1, None),
+            "pinky": finger(None, 0.001),
+        }),
+        _row("d", 1, True, force_per_finger={"thumb": finger(0.7, 0.002), "index": finger(0.2)}),
+        _row("d", 2, False, force_per_finger={"thumb": finger(0.0, 0.001)}),
+        _row("e", 0, True, force_per_finger={"thumb": finger(0.8, 0.03)}),
+    ]  # fmt: skip
+    human = [
+        {"index": 0, "object_id": "cube2", "replay": {"force_per_finger": {
+            "thumb": {"profile_correlation": 0.95}, "index": {"profile_correlation": 0.6}}}},
+        {"index": 1, "object_id": "cube2", "replay": {}},
+    ]  # fmt: skip
+    t = correlation_by_reach(rows, human)
+    d = {b["bin"]: b for b in t["d"]}
+    assert d["0–3 mm"]["fingers"] == 2 and d["0–3 mm"]["correlation"] == pytest.approx(0.8)
+    assert d["0–3 mm"]["replay_fingers"] == 1 and d["0–3 mm"]["replay_correlation"] == 0.95
+    assert (d["5–10 mm"]["fingers"], d["5–10 mm"]["replay_correlation"]) == (1, 0.6)
+    assert d["no target"]["fingers"] == 1 and d["no target"]["correlation"] == pytest.approx(0.1)
+    assert d["3–5 mm"]["correlation"] is None and d["> 20 mm"]["fingers"] == 0
+    assert {b["bin"]: b["fingers"] for b in t["e"]}["> 20 mm"] == 1
+    from rich.console import Console
+
+    console = Console(width=160, record=True)
+    console.print(reach_table("shadow", t))
+    text = console.export_text()
+    assert "0.80 (2)" in text and "0.95 (1)" in text and "no target" in text

@@ -791,6 +791,36 @@ def test_finger_force_profiles_score_a_reproduction_numerically():
         finger_force_profiles(H, R[:, :3], ("thumb", "index", "middle", "ring"))
 
 
+def test_finger_reach_is_the_median_plan_distance_over_the_loaded_frames():
+    """``contact_reach_m``: the plan's finger-to-contact distance, median over the frames the
+    human finger loads (NaN frames skipped, none: ``None``); the ``_reached`` mean scores only
+    fingers within ``REACH_M``; a reach of the wrong shape is refused."""
+    from retarget.run import REACH_M, correlation_means, finger_force_profiles
+
+    h = np.array([0.0, 0.0, 1.0, 2.0, 3.0, 2.0, 1.0, 0.0, 0.0, 0.0])
+    H = np.stack([h, h, h], axis=1)
+    R = np.stack([h, 0.5 * h[::-1], np.zeros_like(h)], axis=1)
+    reach = np.full((10, 3), np.nan)
+    reach[:, 0] = 0.001  # thumb: on its contact throughout
+    reach[2:7, 1] = [0.004, 0.02, 0.03, 0.05, np.nan]  # index: median of four loaded frames
+    reach[0, 1] = 0.0  # (a frame the human does not load: not counted)
+    fingers = ("thumb", "index", "ring")  # ring: no contact target where the human loads
+    per = finger_force_profiles(H, R, fingers, reach)
+    assert per["thumb"]["contact_reach_m"] == pytest.approx(0.001)
+    assert per["index"]["contact_reach_m"] == pytest.approx(0.025)
+    assert per["ring"]["contact_reach_m"] is None
+    m = correlation_means(per)
+    assert (m["fingers_reached"], m["fingers_scored"]) == (1, 3)
+    assert m["force_profile_correlation_mean_reached"] == pytest.approx(1.0)
+    assert m["force_profile_correlation_mean"] == pytest.approx(
+        np.mean([1.0, np.corrcoef(h, h[::-1])[0, 1], 0.0])
+    )
+    assert 0.001 <= REACH_M < 0.025
+    assert "fingers_reached" not in correlation_means(finger_force_profiles(H, R, fingers))
+    with pytest.raises(RetargetError, match="reach"):
+        finger_force_profiles(H, R, fingers, reach[:, :2])
+
+
 def test_human_replay_is_scored_like_a_robot_against_the_first_simulation(human_with_forces):
     """The same simulation reproduces itself exactly; one lagging by 5 frames (compared over
     the common frames) does not; missing forces and unknown fingers are refused."""
