@@ -216,10 +216,11 @@ REACH_M = 0.005
 this distance [m] of the human's contact point (median over the frames the human finger
 loads; ``finger_force_profiles``' ``contact_reach_m``). Measured 2026-12-06 on the
 force-preservation benchmark's five-finger (d) runs that kept the object (222 scored
-fingers, fp_cal2 at 7e2995d): fingers within 3 mm correlate with the human's profile at
-0.83 (72 fingers; the human replay on the same fingers 0.84), 3–5 mm 0.83 (40; 0.83), 5–10
-mm 0.70 (62; 0.78), 10–20 mm 0.83 (35; 0.91), beyond 0.58 (9; 0.96): past 5 mm the
-robot's correlation falls behind the replay's (README, force preservation)."""
+fingers; the same at 7e2995d and in the full run at bbcfe31): fingers within 3 mm
+correlate with the human's profile at 0.83 (72 fingers; the human replay on the same
+fingers 0.84), 3–5 mm 0.83 (40; 0.83), 5–10 mm 0.70 (62; 0.78), 10–20 mm 0.83 (35; 0.91),
+beyond 0.58 (9; 0.96): past 5 mm the robot's correlation falls behind the replay's (README,
+force preservation)."""
 
 LOAD_BEARING_SHARE = 0.1
 """A human finger is *load-bearing* when its mean force over the demonstration is at least this
