@@ -442,7 +442,18 @@ def test_cli_run_forces_reports_force_preservation(human_with_forces, tmp_path):
     notes = force_notes(m)
     assert notes and set(notes) <= set(m["force_per_finger"])
     for name, text in notes.items():
-        assert f"{m['force_per_finger'][name]['profile_correlation']:.2f}" in text
+        v = m["force_per_finger"][name]
+        assert f"{v['profile_correlation']:.2f}" in text
+        reach = v["contact_reach_m"]  # every scored finger has a reach (or None)
+        assert (f"plan {1000 * reach:.0f} mm" if reach is not None else "no contact") in text
+    # the run's reached-finger summary counts the fingers within REACH_M
+    from retarget.run import REACH_M
+    from retarget.viz.report import metrics_rows
+
+    scored = [v for v in m["force_per_finger"].values() if v["profile_correlation"] is not None]
+    within = [v for v in scored if (v["contact_reach_m"] or np.inf) <= REACH_M]
+    assert (m["fingers_reached"], m["fingers_scored"]) == (len(within), len(scored))
+    assert any(k.startswith("force matching: fingers whose plan") for k, _ in metrics_rows(m))
     assert main(["report", str(out), "--no-snapshots", "--renderer", "mujoco"]) == 0
     assert "the force matching&#x27;s plan" in (out / "report.html").read_text()
 

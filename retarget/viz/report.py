@@ -190,9 +190,10 @@ def _section(run_dir: Path, cfg: ReportConfig) -> RunSection:
 
 def force_notes(m: dict) -> dict[str, str]:
     """Per human finger of a force-matched run (``metrics.json``'s ``force_per_finger``): its
-    force profile correlation with the human's and its share of the hand's load, for the force
-    plot's panels (with the human replay's, ``--human-replay``, where the run has one); empty
-    for other runs and for fingers the human never loaded."""
+    force profile correlation with the human's, its share of the hand's load and its reach (how
+    far the plan keeps it from the human's contact), for the force plot's panels (with the
+    human replay's, ``--human-replay``, where the run has one); empty for other runs and for
+    fingers the human never loaded."""
     out = {}
     replay = (m.get("human_replay") or {}).get("force_per_finger") or {}
     for f, v in (m.get("force_per_finger") or {}).items():
@@ -203,6 +204,13 @@ def force_notes(m: dict) -> dict[str, str]:
             text += f" (human replay {r:.2f})"
         if v.get("load_share") is not None:
             text += f" · {100 * v['load_share']:.0f} % of the human hand's force"
+        if "contact_reach_m" in v:  # runs written before bbcfe31 have none
+            d = v["contact_reach_m"]
+            text += (
+                " · no contact target in the plan"
+                if d is None
+                else f" · plan {1000 * d:.0f} mm from the human's contact"
+            )
         out[f] = text
     return out
 
@@ -330,6 +338,15 @@ def metrics_rows(m: dict) -> list[tuple[str, str]]:
                 "force matching: correlation with the human (whole clip / contact frames)",
                 f"{_fmt(m['force_profile_correlation_mean'], digits=2)} / "
                 f"{_fmt(m.get('force_correlation_mean'), digits=2)}",
+            )
+        )
+    if "fingers_reached" in m:
+        rows.append(
+            (
+                "force matching: fingers whose plan reaches the human's contact (≤ 5 mm), "
+                "their correlation",
+                f"{m['fingers_reached']} of {m['fingers_scored']}, "
+                f"{_fmt(m.get('force_profile_correlation_mean_reached'), digits=2)}",
             )
         )
     if (hr := m.get("human_replay")) is not None:
