@@ -286,7 +286,7 @@ def finger_force_profiles(
 
 
 def correlation_means(per: dict) -> dict:
-    """The four means of :func:`finger_force_profiles`' correlations over the scored fingers
+    """The means of :func:`finger_force_profiles`' correlations over the scored fingers
     (all, and the load-bearing ones: ``LOAD_BEARING_SHARE``); ``None`` where none is scored.
     When the fingers carry ``contact_reach_m``, also the whole-clip mean over those whose plan
     reaches the human's contact (``REACH_M``; ``force_profile_correlation_mean_reached``) and

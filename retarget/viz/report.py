@@ -341,10 +341,12 @@ def metrics_rows(m: dict) -> list[tuple[str, str]]:
             )
         )
     if "fingers_reached" in m:
+        from retarget.run import REACH_M
+
         rows.append(
             (
-                "force matching: fingers whose plan reaches the human's contact (≤ 5 mm), "
-                "their correlation",
+                "force matching: fingers whose plan reaches the human's contact "
+                f"(≤ {1000 * REACH_M:.0f} mm), their correlation",
                 f"{m['fingers_reached']} of {m['fingers_scored']}, "
                 f"{_fmt(m.get('force_profile_correlation_mean_reached'), digits=2)}",
             )
