@@ -175,9 +175,11 @@ def plot_finger_forces(
                 color="0.4",
             )
         if notes and notes.get(name):
+            # on a white box: legible over the maxima's dashed lines near the panel's top
             ax.text(
                 0.01, 0.92, notes[name], transform=ax.transAxes, ha="left", va="top",
-                fontsize=7, color="0.25",
+                fontsize=7, color="0.25", zorder=5,
+                bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "none", "pad": 1.0},
             )  # fmt: skip
         ax.set_ylabel(f"{name}\n[N]", fontsize=8)
         ax.set_ylim(0, 1.15 * top)
