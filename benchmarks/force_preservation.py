@@ -698,6 +698,15 @@ CORRELATION_KEYS = ("force_profile_correlation_mean", "force_correlation_mean",
                     "force_profile_correlation_mean_reached")  # fmt: skip
 
 
+def _replays(human: list[dict]) -> dict:
+    """Each scored human replay's ``force_per_finger``, by ``(index, object_id)``."""
+    return {
+        (h["index"], h["object_id"]): h["replay"]["force_per_finger"]
+        for h in human
+        if "force_per_finger" in h.get("replay", {})
+    }
+
+
 def replay_ceiling(rows: list[dict], human: list[dict], variant: str = "d") -> dict:
     """The human replay's force correlations on the runs where ``variant`` succeeded, next to
     the variant's own on the same runs: for each such run with a scored replay, the replay's
@@ -706,11 +715,7 @@ def replay_ceiling(rows: list[dict], human: list[dict], variant: str = "d") -> d
     ``runs`` counts the runs compared."""
     from retarget.run import correlation_means
 
-    replays = {
-        (h["index"], h["object_id"]): h["replay"]["force_per_finger"]
-        for h in human
-        if "force_per_finger" in h.get("replay", {})
-    }
+    replays = _replays(human)
     ours, ceiling = [], []
     for r in rows:
         if r["variant"] != variant or "skipped" in r or "error" in r or not r.get("success"):
@@ -758,11 +763,7 @@ def correlation_by_reach(rows: list[dict], human: list[dict]) -> dict:
     the same fingers where the run has one. Fingers without a reach (no contact target where
     the human loads) are their own bin. ``{variant: [{"bin", "fingers", "correlation",
     "replay_fingers", "replay_correlation"}]}``."""
-    replays = {
-        (h["index"], h["object_id"]): h["replay"]["force_per_finger"]
-        for h in human
-        if "force_per_finger" in h.get("replay", {})
-    }
+    replays = _replays(human)
     out = {}
     for v in ("d", "e"):
         fingers = []  # (reach, ours, replay)
@@ -774,13 +775,14 @@ def correlation_by_reach(rows: list[dict], human: list[dict]) -> dict:
                 if x.get("profile_correlation") is None or "contact_reach_m" not in x:
                     continue
                 reach = x["contact_reach_m"]
-                fingers.append((
-                    np.inf if reach is None else reach, x["profile_correlation"],
-                    rep.get(f, {}).get("profile_correlation"),
-                ))  # fmt: skip
+                fingers.append((reach, x["profile_correlation"], rep.get(f, {}).get(
+                    "profile_correlation")))  # fmt: skip
         out[v] = []
-        for lab, lo, hi in [*_bins(REACH_BINS_M), ("no target", np.inf, np.inf)]:
-            sel = [f for f in fingers if (lo <= f[0] < hi) or (lo == hi == f[0])]
+        for lab, lo, hi in [*_bins(REACH_BINS_M), ("no target", None, None)]:
+            sel = [
+                f for f in fingers
+                if (f[0] is None if lo is None else f[0] is not None and lo <= f[0] < hi)
+            ]  # fmt: skip
             reps = [f[2] for f in sel if f[2] is not None]
             out[v].append({
                 "bin": lab,

@@ -29,6 +29,7 @@ from dataclasses import asdict, dataclass, field
 import mujoco
 import numpy as np
 
+from dexcanvas_core.sim.signal import moving_average
 from retarget.errors import RetargetError
 from retarget.force_matching import servo_gains, squeeze_offsets
 
@@ -124,15 +125,6 @@ def force_error(H: np.ndarray, R: np.ndarray) -> float | None:
     return float(np.abs(Rn - Hn)[:, used].sum() / Hn[:, used].sum())
 
 
-def _smooth(x: np.ndarray, n: int) -> np.ndarray:
-    """Centred moving average of each column of ``x`` (T, F) over ``n`` frames (edges held)."""
-    if n <= 1:
-        return x
-    k = np.ones(n) / n
-    pad = (n // 2, n - 1 - n // 2)
-    return np.stack([np.convolve(np.pad(c, pad, mode="edge"), k, "valid") for c in x.T], axis=1)
-
-
 def correction(
     model: mujoco.MjModel,
     nq: int,
@@ -163,7 +155,7 @@ def correction(
     frames = T if frames is None else min(frames, T)
     Hn = np.linalg.norm(target, axis=2)
     Rn = np.linalg.norm(realized, axis=2)
-    e = _smooth(Hn - Rn, smooth_frames)
+    e = moving_average(Hn - Rn, smooth_frames)
     u = np.where((Rn > 0.05)[..., None], realized, target)
     un = np.linalg.norm(u, axis=2, keepdims=True)
     u = np.where(un > 1e-9, u / np.maximum(un, 1e-9), 0.0)

@@ -32,6 +32,7 @@ from dexcanvas_core.sim.scene import (
     add_object,
     add_table,
 )
+from dexcanvas_core.sim.signal import moving_average
 from dexcanvas_core.sim.tracker import (
     MPCConfig,
     OpenLoop,
@@ -421,11 +422,7 @@ def _tracking_env(hand, geometry, human, robot, tip_sites, cfg: RefineConfig):
     if cfg.finger_close_m > 0:
         _add_closing(basis, m, robot, tip_sites, finger_acts, p_o, cfg.finger_close_m)
     tips_obj = np.einsum("tji,tfj->tfi", R_o, robot.tip_pos_world - p_o[:, None])
-    w = robot.contact_active.astype(np.float64)
-    n = max(1, round(0.1 * human.fps))
-    k = np.ones(n) / n
-    w = np.stack([np.convolve(np.pad(c, (n // 2, n - 1 - n // 2), mode="edge"), k, "valid")
-                  for c in w.T], axis=1)  # fmt: skip
+    w = moving_average(robot.contact_active.astype(np.float64), max(1, round(0.1 * human.fps)))
     ref = _Reference(
         fps=human.fps,
         object_pos=p_o,

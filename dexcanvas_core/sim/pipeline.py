@@ -44,6 +44,7 @@ from dexcanvas_core.sim.reference import (
 )
 from dexcanvas_core.sim.resize import adapt_reference_to_size
 from dexcanvas_core.sim.scene import PhysicsSettings, SimScene, build_scene
+from dexcanvas_core.sim.signal import moving_average
 from dexcanvas_core.sim.tracker import (
     MPCConfig,
     OpenLoop,
@@ -199,12 +200,7 @@ higher frequencies)."""
 
 
 def _moving_average(x: np.ndarray, fps: float, window_s: float = CAPTURE_SMOOTH_S) -> np.ndarray:
-    n = max(1, round(window_s * fps))
-    if n == 1:
-        return x
-    k = np.ones(n) / n
-    pad = np.pad(x, ((n // 2, n - 1 - n // 2), (0, 0)), mode="edge")
-    return np.stack([np.convolve(pad[:, i], k, mode="valid") for i in range(x.shape[1])], axis=1)
+    return moving_average(x, max(1, round(window_s * fps)))
 
 
 def capture_acceleration(pos: np.ndarray, fps: float) -> np.ndarray:

@@ -44,6 +44,7 @@ from dexcanvas_core.sim.forces import (
 from dexcanvas_core.sim.grip import carried_load, contact_keeping_force, squeeze_offsets
 from dexcanvas_core.sim.hand import FINGER_HINGES, HAND_JOINTS
 from dexcanvas_core.sim.reference import Reference
+from dexcanvas_core.sim.signal import moving_average
 
 ACTION_NAMES: tuple[str, ...] = (
     "wrist_x", "wrist_y", "wrist_z", "wrist_rx", "wrist_ry", "wrist_rz",
@@ -145,12 +146,7 @@ def grip_weights(ref: Reference, cfg: TrackingConfig, tip_radius: np.ndarray) ->
         return np.zeros_like(ref.tip_distance)
     gap = ref.tip_distance - tip_radius[None, :]
     w = np.clip((cfg.grip_far_m - gap) / (cfg.grip_far_m - cfg.grip_near_m), 0.0, 1.0)
-    n = max(1, round(cfg.grip_smooth_s * ref.fps))
-    if n > 1:
-        kernel = np.ones(n) / n
-        w = np.stack([np.convolve(np.pad(c, (n // 2, n - 1 - n // 2), mode="edge"), kernel,
-                                  mode="valid") for c in w.T], axis=1)  # fmt: skip
-    return w
+    return moving_average(w, max(1, round(cfg.grip_smooth_s * ref.fps)))
 
 
 def quat_angle(q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
