@@ -236,8 +236,31 @@ same runs and fingers, 2026-12-06) reproduces its own load-bearing profiles at 0
 touches at 0.47."""
 
 
+def profile_band_frames(fps: float) -> int:
+    """Frames of the moving average that band-limits force profiles to the demonstration's
+    bandwidth (``profile_correlation_smoothed``): the force pipeline's capture smoothing
+    (``dexcanvas_core.sim.pipeline.CAPTURE_SMOOTH_S``, 50 ms; the captured motion the human's
+    forces are simulated from says nothing faster). Measured 2026-12-06 on the
+    force-preservation benchmark's five-finger (d) runs that kept the object (68; power above a
+    75 ms moving average, median over loaded fingers): the human's profiles carry 0.2 % of it,
+    the re-simulated robots' 1.6 % (Inspire, 0.05 N·m·s/rad servo damping) to 8.5 % (Ability,
+    none in PSYONIC's model). That is contact chatter: Ability's ring finger on the heavy
+    cylinder of cylinder1/finger_transfer swings between 0 and 13 N every 10 ms (2 ms physics
+    steps; the same at 1 ms), and its frame means look like noise. The whole-clip correlation
+    0.797 reads 0.845 band-limited (README, force preservation)."""
+    if not (np.isfinite(fps) and fps > 0):
+        raise RetargetError(f"force profiles: fps must be > 0, got {fps}")
+    from dexcanvas_core.sim.pipeline import CAPTURE_SMOOTH_S
+
+    return max(1, round(CAPTURE_SMOOTH_S * fps))
+
+
 def finger_force_profiles(
-    H: np.ndarray, R: np.ndarray, fingers, reach: np.ndarray | None = None
+    H: np.ndarray,
+    R: np.ndarray,
+    fingers,
+    reach: np.ndarray | None = None,
+    band_frames: int | None = None,
 ) -> dict:
     """Per finger, how the contact-force magnitudes ``R`` (T, F) [N] reproduce the reference
     ``H`` (T, F) [N] (columns named by ``fingers``): ``correlation`` over the frames where
@@ -251,7 +274,11 @@ def finger_force_profiles(
     human's contact point (``RobotTrajectory.contact_err``, NaN where inactive); each scored
     finger then also gets ``contact_reach_m``, its median over the frames the reference loads
     (``None`` when the plan has no contact target there). A finger the plan cannot bring onto
-    the human's contact presses elsewhere or nowhere: ``REACH_M``."""
+    the human's contact presses elsewhere or nowhere: ``REACH_M``.
+
+    ``band_frames`` (:func:`profile_band_frames`), optional: each scored finger then also gets
+    ``profile_correlation_smoothed``, the whole-clip correlation of both profiles
+    moving-averaged over that many frames (the demonstration's bandwidth)."""
     H = np.asarray(H, dtype=np.float64)
     R = np.asarray(R, dtype=np.float64)
     if H.ndim != 2 or H.shape != R.shape or H.shape[1] != len(fingers):
@@ -261,6 +288,10 @@ def finger_force_profiles(
         )
     if reach is not None and np.shape(reach) != H.shape:
         raise RetargetError(f"force profiles: reach {np.shape(reach)} must be {H.shape}")
+    if band_frames is not None and not (isinstance(band_frames, int) and band_frames >= 1):
+        raise RetargetError(f"force profiles: band_frames must be an int >= 1, got {band_frames}")
+    if band_frames is not None:
+        from dexcanvas_core.sim.signal import moving_average
     per = {}
     total = float(H.mean(axis=0).sum())
     for i, f in enumerate(fingers):
@@ -278,6 +309,9 @@ def finger_force_profiles(
             "robot_force_mean_n": float(r.mean()),
             "load_share": hm / total if total > 0 else None,
         }
+        if band_frames is not None:
+            hs, rs = moving_average(np.stack([h, r], axis=1), band_frames).T
+            per[f]["profile_correlation_smoothed"] = _corr(hs, rs) if used else None
         if reach is not None and used:
             d = np.asarray(reach, dtype=np.float64)[held, i]
             d = d[np.isfinite(d)]
@@ -288,12 +322,14 @@ def finger_force_profiles(
 def correlation_means(per: dict) -> dict:
     """The means of :func:`finger_force_profiles`' correlations over the scored fingers
     (all, and the load-bearing ones: ``LOAD_BEARING_SHARE``); ``None`` where none is scored.
+    When the fingers carry ``profile_correlation_smoothed``, also its mean
+    (``force_profile_correlation_mean_smoothed``).
     When the fingers carry ``contact_reach_m``, also the whole-clip mean over those whose plan
     reaches the human's contact (``REACH_M``; ``force_profile_correlation_mean_reached``) and
     how many of the scored fingers do (``fingers_reached``, of ``fingers_scored``)."""
 
     def mean_of(key: str, keep=lambda v: True) -> float | None:
-        vals = [v[key] for v in per.values() if v[key] is not None and keep(v)]
+        vals = [v[key] for v in per.values() if v.get(key) is not None and keep(v)]
         return float(np.mean(vals)) if vals else None
 
     def load_bearing(v: dict) -> bool:
@@ -306,6 +342,8 @@ def correlation_means(per: dict) -> dict:
         "force_profile_correlation_mean_load_bearing": mean_of("profile_correlation", load_bearing),
     }
     scored = [v for v in per.values() if v["profile_correlation"] is not None]
+    if any("profile_correlation_smoothed" in v for v in scored):
+        out["force_profile_correlation_mean_smoothed"] = mean_of("profile_correlation_smoothed")
     if any("contact_reach_m" in v for v in scored):
         reached = [v for v in scored if reaches(v)]
         out["force_profile_correlation_mean_reached"] = mean_of("profile_correlation", reaches)
@@ -350,7 +388,7 @@ def human_replay_metrics(first, second, fingers=None) -> dict:
     cols = [FORCE_GROUPS.index(f) for f in fingers]
     H = np.linalg.norm(first.contacts.finger_totals()[:T, cols], axis=2)
     R = np.linalg.norm(second.contacts.finger_totals()[:T, cols], axis=2)
-    per = finger_force_profiles(H, R, fingers)
+    per = finger_force_profiles(H, R, fingers, band_frames=profile_band_frames(first.fps))
     return {"force_per_finger": per, "frames": T, **correlation_means(per)}
 
 
@@ -378,7 +416,10 @@ def force_metrics(robot, sim, human, retargeter) -> dict:
     col = [sim.fingers.index(retargeter.hand.fingers[f]) for f in retargeter.tip_human]
     R = np.linalg.norm(sim.finger_force_world[:, col], axis=2)
     # a robot without a contact plan (a baseline's replay scored by the benchmark) has no reach
-    per = finger_force_profiles(H, R, retargeter.tip_human, getattr(robot, "contact_err", None))
+    per = finger_force_profiles(
+        H, R, retargeter.tip_human, getattr(robot, "contact_err", None),
+        profile_band_frames(human.fps),
+    )  # fmt: skip
     human_total = human.contacts.finger_totals()[:, : len(FORCE_GROUPS)].sum(axis=1)
     robot_total = sim.finger_force_world.sum(axis=1)
     touch = np.linalg.norm(human_total, axis=1) > 0.05
@@ -713,11 +754,16 @@ def _print_summary(m: dict, out_dir: Path) -> None:
         t.add_row("servo tracking error mean (sim − command)", servo)
     forces = ", ".join(f"{k} {v:.2f}" for k, v in m["finger_force_mean_n"].items())
     t.add_row("mean contact force [N]", forces)
+    from dexcanvas_core.sim.pipeline import CAPTURE_SMOOTH_S
+
+    band_ms = 1e3 * CAPTURE_SMOOTH_S  # profile_band_frames' window
     if m.get("force_correlation_mean") is not None:
         t.add_row(
             "force matching",
             f"correlation {_num(m['force_profile_correlation_mean'])} (whole clip) / "
-            f"{_num(m['force_correlation_mean'])} (contact frames); load-bearing fingers "
+            f"{_num(m['force_correlation_mean'])} (contact frames) / "
+            f"{_num(m.get('force_profile_correlation_mean_smoothed'))} (whole clip over "
+            f"{band_ms:.0f} ms); load-bearing fingers "
             f"{_num(m['force_profile_correlation_mean_load_bearing'])}; object force error "
             f"{_num(m['object_force_error_mean_n'])} N, wrench feasible "
             f"{100 * m['wrench_feasible_fraction']:.0f} % of contact frames"
@@ -733,8 +779,9 @@ def _print_summary(m: dict, out_dir: Path) -> None:
         if hr["success"]:
             text = (
                 f"correlation {_num(hr['force_profile_correlation_mean'])} (whole clip) / "
-                f"{_num(hr['force_correlation_mean'])} (contact frames): the human's forces "
-                "against themselves, the robot's ceiling"
+                f"{_num(hr['force_correlation_mean'])} (contact frames) / "
+                f"{_num(hr.get('force_profile_correlation_mean_smoothed'))} (whole clip over "
+                f"{band_ms:.0f} ms): the human's forces against themselves, the robot's ceiling"
             )
         else:
             text = f"[red]lost the object at frame {hr['failed_at_frame']}[/red]: no ceiling"

@@ -132,8 +132,9 @@ def test_replay_has_its_own_cache_key_and_the_first_keeps_its_own(traj):
     assert not fp.BenchConfig(human_replay=False).replays()
 
 
-def _finger(corr, profile, share):
-    return {"correlation": corr, "profile_correlation": profile, "load_share": share}
+def _finger(corr, profile, share, smoothed=None):
+    f = {"correlation": corr, "profile_correlation": profile, "load_share": share}
+    return f if smoothed is None else {**f, "profile_correlation_smoothed": smoothed}
 
 
 def test_replay_ceiling_compares_the_same_runs_and_fingers(tmp_path):
@@ -141,23 +142,25 @@ def test_replay_ceiling_compares_the_same_runs_and_fingers(tmp_path):
     only the fingers each run scores (a four-finger hand's, with its load shares)."""
     human = [
         {"index": 0, "object_id": "cube2", "replay": {"force_per_finger": {
-            "thumb": _finger(0.9, 0.95, 0.5), "index": _finger(0.5, 0.7, 0.4),
-            "pinky": _finger(0.1, 0.2, 0.1)}}},
+            "thumb": _finger(0.9, 0.95, 0.5, 0.97), "index": _finger(0.5, 0.7, 0.4, 0.8),
+            "pinky": _finger(0.1, 0.2, 0.1, 0.3)}}},
         {"index": 1, "object_id": "cube2", "replay": {"success": False}},  # not scored
         {"index": 2, "object_id": "cube2h", "replay": {"force_per_finger": {
-            "thumb": _finger(0.6, 0.8, 0.6), "index": _finger(None, None, 0.0)}}},
+            "thumb": _finger(0.6, 0.8, 0.6, 0.9), "index": _finger(None, None, 0.0)}}},
     ]  # fmt: skip
     base = {"hand": "leap", "variant": "d", "success": True}
     rows = [
         {**base, "index": 0, "object_id": "cube2",
          "force_correlation_mean": 0.6, "force_profile_correlation_mean": 0.75,
+         "force_profile_correlation_mean_smoothed": 0.86,
          "force_per_finger": {"thumb": _finger(0.8, 0.9, 0.55), "index": _finger(0.4, 0.6, 0.03),
                               "middle": _finger(None, None, 0.0)}},
         {**base, "index": 1, "object_id": "cube2", "force_per_finger": {
             "thumb": _finger(0.8, 0.9, 1.0)}},  # its replay failed
         {**base, "index": 2, "object_id": "cube2h", "force_per_finger": {
             "thumb": _finger(0.2, 0.3, 1.0), "index": _finger(0.1, 0.1, 0.2)},
-         "force_correlation_mean": 0.15, "force_profile_correlation_mean": 0.2},
+         "force_correlation_mean": 0.15, "force_profile_correlation_mean": 0.2,
+         "force_profile_correlation_mean_smoothed": 0.3},
         {**base, "index": 0, "object_id": "cube2", "success": False,
          "force_per_finger": {"thumb": _finger(0.0, 0.0, 1.0)}},  # failed: not compared
         {**base, "index": 0, "object_id": "cube2", "variant": "e", "success": True,
@@ -175,6 +178,10 @@ def test_replay_ceiling_compares_the_same_runs_and_fingers(tmp_path):
     # load-bearing by the run's shares: run 0's index carries 3 % there, so the thumb only
     assert c["replay"]["force_correlation_mean_load_bearing"] == pytest.approx(np.mean([0.9, 0.6]))
     assert c["ours"]["force_correlation_mean"] == pytest.approx(np.mean([0.6, 0.15]))
+    # band-limited: the replay's smoothed correlations on the same fingers
+    assert c["replay"]["force_profile_correlation_mean_smoothed"] == pytest.approx(
+        np.mean([(0.97 + 0.8) / 2, 0.9])
+    )
     ce = fp.replay_ceiling(rows, human, "e")  # (e)'s one successful run, its thumb
     assert ce["runs"] == 1 and ce["replay"]["force_correlation_mean"] == pytest.approx(0.9)
     # the targets carry it, and the table shows it
@@ -184,6 +191,8 @@ def test_replay_ceiling_compares_the_same_runs_and_fingers(tmp_path):
     assert prof["human_replay"] == c["replay"]["force_profile_correlation_mean"]
     assert prof["same_runs"] == c["ours"]["force_profile_correlation_mean"]
     assert prof["human_replay_runs"] == 2
+    assert prof["smoothed_value"] == pytest.approx(np.mean([0.86, 0.3]))
+    assert prof["human_replay_smoothed"] == pytest.approx(np.mean([(0.97 + 0.8) / 2, 0.9]))
     e = next(x for x in checks if "successful (e)" in x["target"] and x["name"] == "correlation")
     assert "human_replay" not in e  # no (e) ceiling given
     from rich.console import Console
@@ -193,6 +202,7 @@ def test_replay_ceiling_compares_the_same_runs_and_fingers(tmp_path):
     con.print(fp.variants_table("leap", agg, c))
     text = con.export_text()
     assert "human replay 0.81" in text and "same 2 runs: 0.47" in text
+    assert "over 50 ms 0.58 (same runs 0.58; human replay 0.89)" in text
     assert "human replay (MPC seed 1 vs 0)" in text
     # the plot's second panel: (d) against the replay per hand
     png = fp.plot_success({"leap": agg}, {}, tmp_path / "fp.png", {"leap": c})

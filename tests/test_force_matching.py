@@ -454,6 +454,14 @@ def test_cli_run_forces_reports_force_preservation(human_with_forces, tmp_path):
     within = [v for v in scored if (v["contact_reach_m"] or np.inf) <= REACH_M]
     assert (m["fingers_reached"], m["fingers_scored"]) == (len(within), len(scored))
     assert any(k.startswith("force matching: fingers whose plan") for k, _ in metrics_rows(m))
+    # the band-limited correlation: every scored finger has one, and the run their mean
+    smooth = [v["profile_correlation_smoothed"] for v in scored]
+    assert all(-1.0 <= c <= 1.0 for c in smooth)
+    assert m["force_profile_correlation_mean_smoothed"] == pytest.approx(np.mean(smooth))
+    row = dict(metrics_rows(m))
+    key = next(k for k in row if k.startswith("force matching: correlation with the human"))
+    assert "over 50 ms" in key
+    assert row[key].endswith(f"{m['force_profile_correlation_mean_smoothed']:.2f}")
     assert main(["report", str(out), "--no-snapshots", "--renderer", "mujoco"]) == 0
     assert "the force matching&#x27;s plan" in (out / "report.html").read_text()
 
@@ -832,6 +840,41 @@ def test_finger_reach_is_the_median_plan_distance_over_the_loaded_frames():
         finger_force_profiles(H, R, fingers, reach[:, :2])
 
 
+def test_band_limited_correlation_sees_the_profile_through_contact_chatter():
+    """``profile_correlation_smoothed``: a reproduction of the human's slow profile plus a
+    contact bouncing at half the frame rate correlates poorly frame by frame, and near
+    perfectly once both are averaged over the demonstration's bandwidth (``band_frames``
+    even, so the alternation cancels); a reproduction of the wrong shape stays wrong; the
+    window is the force pipeline's 50 ms capture smoothing, and a bad one is refused."""
+    from dexcanvas_core.sim.signal import moving_average
+    from retarget.run import correlation_means, finger_force_profiles, profile_band_frames
+
+    T = 240
+    h = 2.0 * np.clip(np.sin(np.linspace(0.0, 2 * np.pi, T)), 0.0, None)  # one press, 0–2 N
+    chatter = np.where(np.arange(T) % 2, 1.5, -1.5) * (h > 0.3)
+    H = np.stack([h, h], axis=1)
+    R = np.stack([np.clip(h + chatter, 0.0, None), h[::-1]], axis=1)
+    n = profile_band_frames(120.0)
+    assert n == 6 and profile_band_frames(30.0) == 2  # 50 ms
+    per = finger_force_profiles(H, R, ("thumb", "index"), band_frames=n)
+    raw, smooth = per["thumb"]["profile_correlation"], per["thumb"]["profile_correlation_smoothed"]
+    assert raw < 0.8 and smooth > 0.98
+    want = np.corrcoef(moving_average(h[:, None], n)[:, 0], moving_average(R[:, :1], n)[:, 0])
+    assert smooth == pytest.approx(want[0, 1])
+    assert per["index"]["profile_correlation_smoothed"] < 0.0  # the mirrored press
+    m = correlation_means(per)
+    assert m["force_profile_correlation_mean_smoothed"] == pytest.approx(
+        np.mean([smooth, per["index"]["profile_correlation_smoothed"]])
+    )
+    assert "force_profile_correlation_mean_smoothed" not in correlation_means(
+        finger_force_profiles(H, R, ("thumb", "index"))
+    )
+    with pytest.raises(RetargetError, match="band_frames"):
+        finger_force_profiles(H, R, ("thumb", "index"), band_frames=0)
+    with pytest.raises(RetargetError, match="fps"):
+        profile_band_frames(0.0)
+
+
 def test_human_replay_is_scored_like_a_robot_against_the_first_simulation(human_with_forces):
     """The same simulation reproduces itself exactly; one lagging by 5 frames (compared over
     the common frames) does not; missing forces and unknown fingers are refused."""
@@ -897,7 +940,8 @@ def test_cli_human_replay_scores_the_human_forces_against_themselves(
     rows = dict(metrics_rows(m))
     label = "human replay (MPC seed 1): the human against itself"
     assert rows[label] == (
-        f"{hr['force_profile_correlation_mean']:.2f} / {hr['force_correlation_mean']:.2f}"
+        f"{hr['force_profile_correlation_mean']:.2f} / {hr['force_correlation_mean']:.2f} / "
+        f"{hr['force_profile_correlation_mean_smoothed']:.2f}"
     )
     assert main(["report", str(out), "--no-snapshots", "--renderer", "mujoco"]) == 0
     assert label in (out / "report.html").read_text()

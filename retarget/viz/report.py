@@ -333,11 +333,16 @@ def metrics_rows(m: dict) -> list[tuple[str, str]]:
             )
         )
     if m.get("force_profile_correlation_mean") is not None:
+        from dexcanvas_core.sim.pipeline import CAPTURE_SMOOTH_S
+
         rows.append(
             (
-                "force matching: correlation with the human (whole clip / contact frames)",
+                "force matching: correlation with the human (whole clip / contact frames / "
+                f"whole clip over {1e3 * CAPTURE_SMOOTH_S:.0f} ms, the demonstration's "
+                "bandwidth)",
                 f"{_fmt(m['force_profile_correlation_mean'], digits=2)} / "
-                f"{_fmt(m.get('force_correlation_mean'), digits=2)}",
+                f"{_fmt(m.get('force_correlation_mean'), digits=2)} / "
+                f"{_fmt(m.get('force_profile_correlation_mean_smoothed'), digits=2)}",
             )
         )
     if "fingers_reached" in m:
@@ -354,7 +359,8 @@ def metrics_rows(m: dict) -> list[tuple[str, str]]:
     if (hr := m.get("human_replay")) is not None:
         value = (
             f"{_fmt(hr.get('force_profile_correlation_mean'), digits=2)} / "
-            f"{_fmt(hr.get('force_correlation_mean'), digits=2)}"
+            f"{_fmt(hr.get('force_correlation_mean'), digits=2)} / "
+            f"{_fmt(hr.get('force_profile_correlation_mean_smoothed'), digits=2)}"
             if hr.get("success")
             else f"lost the object at frame {_fmt(hr.get('failed_at_frame'), digits=0)}"
         )
