@@ -288,7 +288,9 @@ def finger_force_profiles(
         )
     if reach is not None and np.shape(reach) != H.shape:
         raise RetargetError(f"force profiles: reach {np.shape(reach)} must be {H.shape}")
-    if band_frames is not None and not (isinstance(band_frames, int) and band_frames >= 1):
+    if band_frames is not None and not (
+        isinstance(band_frames, int | np.integer) and band_frames >= 1
+    ):
         raise RetargetError(f"force profiles: band_frames must be an int >= 1, got {band_frames}")
     if band_frames is not None:
         from dexcanvas_core.sim.signal import moving_average

@@ -869,8 +869,11 @@ def test_band_limited_correlation_sees_the_profile_through_contact_chatter():
     assert "force_profile_correlation_mean_smoothed" not in correlation_means(
         finger_force_profiles(H, R, ("thumb", "index"))
     )
+    assert finger_force_profiles(H, R, ("thumb", "index"), band_frames=np.int64(n)) == per
     with pytest.raises(RetargetError, match="band_frames"):
         finger_force_profiles(H, R, ("thumb", "index"), band_frames=0)
+    with pytest.raises(RetargetError, match="band_frames"):
+        finger_force_profiles(H, R, ("thumb", "index"), band_frames=2.5)
     with pytest.raises(RetargetError, match="fps"):
         profile_band_frames(0.0)
 
