@@ -133,6 +133,7 @@ from _common import (
 )
 from force_pipeline import _init_worker, _one_thread_env
 
+from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S
 from retarget.run import HUMAN_REPLAY_SEED, human_sim_config
 
 DEFAULT_OUT = Path(__file__).parent / "results" / "force_preservation.json"
@@ -974,13 +975,13 @@ def target_checks(
     if sa is not None and sd is not None:
         ratio_met = bool(sd >= TARGET_RATIO * sa and sd > 0)
 
-    def replay(v: str, key: str) -> dict:
+    def replay(v: str, key: str, suffix: str = "") -> dict:
         c = (ceiling or {}).get(v)
         if c is None:
             return {}
         return {
-            "human_replay": c["replay"][key],
-            "same_runs": c["ours"][key],
+            f"human_replay{suffix}": c["replay"][key],
+            f"same_runs{suffix}": c["ours"][key],
             "human_replay_runs": c["runs"],
         }
 
@@ -1011,11 +1012,7 @@ def target_checks(
             "reached_fingers_value": d["force_profile_correlation_mean_reached_successful"],
             "smoothed_value": d["force_profile_correlation_mean_smoothed_successful"],
             **replay("d", "force_profile_correlation_mean"),
-            **{
-                f"{k}_smoothed": v
-                for k, v in replay("d", "force_profile_correlation_mean_smoothed").items()
-                if k != "human_replay_runs"
-            },
+            **replay("d", "force_profile_correlation_mean_smoothed", "_smoothed"),
         },
         {
             "scope": scope,
@@ -1234,8 +1231,6 @@ def heavy_table(hv_by_scope: dict, human_hv: dict | None = None):
 
 def targets_table(scope: str, checks: list[dict]):
     from rich.table import Table
-
-    from dexcanvas_core.sim.pipeline import CAPTURE_SMOOTH_S
 
     t = Table(title=f"targets (issue 7) on {scope}")
     t.add_column("target")
@@ -1727,7 +1722,8 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
             "retarget.run.REACH_M; correlation_by_reach pools single fingers by reach",
             "force_profile_correlation_mean_smoothed": "the whole-clip mean with both force "
             "profiles moving-averaged over the demonstration's bandwidth first "
-            "(retarget.run.profile_band_frames: the force pipeline's 50 ms capture smoothing; "
+            f"(retarget.run.profile_band_frames: the force pipeline's {1e3 * CAPTURE_SMOOTH_S:.0f}"
+            " ms capture smoothing; "
             "the robots' contact chatter above it is not part of the human's profile)",
             "object_force_error_mean_n": "mean over frames where the human touches of |sum of "
             "robot contact forces - sum of human contact forces| on the object (force part of "

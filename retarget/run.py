@@ -24,6 +24,7 @@ from typing import Literal
 
 import numpy as np
 
+from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S, moving_average
 from retarget.errors import RetargetError
 
 log = logging.getLogger(__name__)
@@ -239,7 +240,7 @@ touches at 0.47."""
 def profile_band_frames(fps: float) -> int:
     """Frames of the moving average that band-limits force profiles to the demonstration's
     bandwidth (``profile_correlation_smoothed``): the force pipeline's capture smoothing
-    (``dexcanvas_core.sim.pipeline.CAPTURE_SMOOTH_S``, 50 ms; the captured motion the human's
+    (``dexcanvas_core.sim.signal.CAPTURE_SMOOTH_S``, 50 ms; the captured motion the human's
     forces are simulated from says nothing faster). Measured 2026-12-06 on the
     force-preservation benchmark's five-finger (d) runs that kept the object (68; power above a
     75 ms moving average, median over loaded fingers): the human's profiles carry 0.2 % of it,
@@ -250,8 +251,6 @@ def profile_band_frames(fps: float) -> int:
     0.797 reads 0.845 band-limited (README, force preservation)."""
     if not (np.isfinite(fps) and fps > 0):
         raise RetargetError(f"force profiles: fps must be > 0, got {fps}")
-    from dexcanvas_core.sim.pipeline import CAPTURE_SMOOTH_S
-
     return max(1, round(CAPTURE_SMOOTH_S * fps))
 
 
@@ -293,7 +292,7 @@ def finger_force_profiles(
     ):
         raise RetargetError(f"force profiles: band_frames must be an int >= 1, got {band_frames}")
     if band_frames is not None:
-        from dexcanvas_core.sim.signal import moving_average
+        Hs, Rs = moving_average(H, band_frames), moving_average(R, band_frames)
     per = {}
     total = float(H.mean(axis=0).sum())
     for i, f in enumerate(fingers):
@@ -312,8 +311,7 @@ def finger_force_profiles(
             "load_share": hm / total if total > 0 else None,
         }
         if band_frames is not None:
-            hs, rs = moving_average(np.stack([h, r], axis=1), band_frames).T
-            per[f]["profile_correlation_smoothed"] = _corr(hs, rs) if used else None
+            per[f]["profile_correlation_smoothed"] = _corr(Hs[:, i], Rs[:, i]) if used else None
         if reach is not None and used:
             d = np.asarray(reach, dtype=np.float64)[held, i]
             d = d[np.isfinite(d)]
@@ -756,8 +754,6 @@ def _print_summary(m: dict, out_dir: Path) -> None:
         t.add_row("servo tracking error mean (sim − command)", servo)
     forces = ", ".join(f"{k} {v:.2f}" for k, v in m["finger_force_mean_n"].items())
     t.add_row("mean contact force [N]", forces)
-    from dexcanvas_core.sim.pipeline import CAPTURE_SMOOTH_S
-
     band_ms = 1e3 * CAPTURE_SMOOTH_S  # profile_band_frames' window
     if m.get("force_correlation_mean") is not None:
         t.add_row(

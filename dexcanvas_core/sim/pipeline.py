@@ -44,7 +44,7 @@ from dexcanvas_core.sim.reference import (
 )
 from dexcanvas_core.sim.resize import adapt_reference_to_size
 from dexcanvas_core.sim.scene import PhysicsSettings, SimScene, build_scene
-from dexcanvas_core.sim.signal import moving_average
+from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S, moving_average
 from dexcanvas_core.sim.tracker import (
     MPCConfig,
     OpenLoop,
@@ -191,12 +191,6 @@ def simulate(
     if keep_state:
         res.scene, res.reference = scene, ref
     return res
-
-
-CAPTURE_SMOOTH_S = 0.05
-"""Bandwidth of the comparison with the captured motion: positions (for the acceleration) and
-forces are both moving-averaged over this window [s] (mocap accelerations are meaningless at
-higher frequencies)."""
 
 
 def _moving_average(x: np.ndarray, fps: float, window_s: float = CAPTURE_SMOOTH_S) -> np.ndarray:

@@ -333,7 +333,7 @@ def metrics_rows(m: dict) -> list[tuple[str, str]]:
             )
         )
     if m.get("force_profile_correlation_mean") is not None:
-        from dexcanvas_core.sim.pipeline import CAPTURE_SMOOTH_S
+        from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S
 
         rows.append(
             (
