@@ -59,8 +59,8 @@ class ValidateConfig:
     table: bool = True
     """Put a table (z = 0 plane) under the object."""
     contact_timeconst: float | None = None
-    """Override every contact's ``solref`` time constant [s] (e.g. 0.005 for force matching:
-    stiff contacts keep the pressed force close to the ``K⁻¹Jᵀf`` command)."""
+    """Override every contact's ``solref`` time constant [s] (force matching: the force
+    pipeline's, ``retarget.run.FORCE_CONTACT_TIMECONST``)."""
 
 
 @dataclass
