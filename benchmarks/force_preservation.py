@@ -38,13 +38,13 @@ Per hand (``--hands``, default every registered hand; a hand skips pairs it cann
 * **(d) + forces** — ``force_matching=True`` on the force-annotated demonstration (contacts
   inferred from its geometry as in (c), the human's per-finger forces from its records →
   force-distribution QP → ``K⁻¹Jᵀf`` offsets),
-  re-simulated on ``q_command`` with stiff contacts (``retarget.run.FORCE_CONTACT_TIMECONST``),
+  re-simulated on ``q_command`` with the force pipeline's contacts
+  (``retarget.run.FORCE_CONTACT_TIMECONST``, 20 ms: the default contacts (a)–(c) have too),
   then force-calibrated as ``retarget run --forces`` does (``retarget.force_calibration``,
   ``--calibrate-iterations``, default 6; 0: the planned commands): the row is the chosen
   iterate's, with the planned commands' success in ``planned_success``;
-  (a)–(c) use the re-simulation's default contacts;
 * **(e) + refinement** — (d), and where (d)'s replay fails, ``retarget.refine.refine``: the
-  force pipeline's sampling MPC on the robot hand (stiff contacts, as (d)), starting from (d)'s
+  force pipeline's sampling MPC on the robot hand (its contacts as (d)'s), starting from (d)'s
   commands; success and object errors are the refined rollout's (no force columns: the
   refinement reports no per-finger forces), plus how far the commands moved.
 
@@ -134,7 +134,7 @@ from _common import (
 from force_pipeline import _init_worker, _one_thread_env
 
 from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S
-from retarget.run import HUMAN_REPLAY_SEED, human_sim_config
+from retarget.run import FORCE_CONTACT_TIMECONST, HUMAN_REPLAY_SEED, human_sim_config
 
 DEFAULT_OUT = Path(__file__).parent / "results" / "force_preservation.json"
 NOT_REQUESTED = "not requested (--variants)"
@@ -382,7 +382,7 @@ def _hand_job(args) -> list[dict]:
     from retarget.baselines import KinematicMetrics, measure_trajectory
     from retarget.hands import get_hand
     from retarget.retargeter import RetargetConfig, Retargeter
-    from retarget.run import FORCE_CONTACT_TIMECONST, refined_force_metrics
+    from retarget.run import refined_force_metrics
     from retarget.validate import Resimulator, ValidateConfig
 
     base, traj, human, dex_wrist, computed, overrides, refine_overrides, n_calibrate = args
@@ -1089,8 +1089,8 @@ def variants_table(title: str, agg: dict, ceiling: dict | None = None):
         "contact frames / whole demonstration, load-bearing fingers only (≥ "
         f"{100 * LOAD_BEARING_SHARE:.0f} % of the hand's force); successful runs), F err "
         "(object force error, N and % of m·g): runs with human forces, all / successful. "
-        "pen: kinematic / re-simulation max. (a)–(c) re-simulated with default contacts, (d) "
-        "with stiff contacts.",
+        "pen: kinematic / re-simulation max. Every variant re-simulated with the force "
+        f"pipeline's contacts (solref {1e3 * FORCE_CONTACT_TIMECONST:.0f} ms).",
     )
     cols = ("variant", "runs", "strict %", "loose %", "obj cm", "rot °", "F corr", "F err N",
             "F err %mg", "pen mm", "ms/frame")  # fmt: skip
