@@ -134,7 +134,11 @@ and the force calibration (``retarget.force_calibration``) makes up the rest. Me
 force-preservation benchmark (five-finger hands and LEAP, ``--variants d``, 2026-12-07), 5 /
 10 / 20 ms: five-finger (d) strict success 62 / 64 / 68 %, paired heavy / light 50 / 64,
 58 / 61, 64 / 69 %, force profile correlation on successful runs 0.792 / 0.789 / 0.793 (on the
-66 runs all three lift 0.802 / 0.801 / 0.811), object force error 6 / 7 / 8 % of the weight."""
+66 runs all three lift 0.802 / 0.801 / 0.811), object force error 6 / 7 / 8 % of the weight.
+Every hand's and object's collision geoms already carry this ``solref`` (and MuJoCo's default
+``solimp``), so the override's one remaining effect is zero contact margin (some of Shadow's
+geoms have 0.5 mm). A literal, pinned to the pipeline's by a test: importing
+``dexcanvas_core.sim.scene`` here would cost the CLI ~2 s."""
 
 
 HUMAN_REPLAY_SEED = 1
@@ -255,7 +259,8 @@ def profile_band_frames(fps: float) -> int:
     none in PSYONIC's model). That is contact chatter: Ability's ring finger on the heavy
     cylinder of cylinder1/finger_transfer swings between 0 and 13 N every 10 ms (2 ms physics
     steps; the same at 1 ms), and its frame means look like noise. The whole-clip correlation
-    0.797 reads 0.845 band-limited (README, force preservation)."""
+    0.797 read 0.845 band-limited (5 ms contacts then; with the force pipeline's 20 ms,
+    2026-12-07 on a slower machine, 0.793 and 0.820: README, force preservation)."""
     if not (np.isfinite(fps) and fps > 0):
         raise RetargetError(f"force profiles: fps must be > 0, got {fps}")
     return max(1, round(CAPTURE_SMOOTH_S * fps))
