@@ -41,7 +41,7 @@ Per hand (``--hands``, default every registered hand; a hand skips pairs it cann
   re-simulated on ``q_command`` with the force pipeline's contacts
   (``retarget.run.FORCE_CONTACT_TIMECONST``, 20 ms: the default contacts (a)–(c) have too),
   then force-calibrated as ``retarget run --forces`` does (``retarget.force_calibration``,
-  ``--calibrate-iterations``, default 6; 0: the planned commands): the row is the chosen
+  ``--calibrate-iterations``, default 10; 0: the planned commands): the row is the chosen
   iterate's, with the planned commands' success in ``planned_success``;
 * **(e) + refinement** — (d), and where (d)'s replay fails, ``retarget.refine.refine``: the
   force pipeline's sampling MPC on the robot hand (its contacts as (d)'s), starting from (d)'s
@@ -208,7 +208,7 @@ class BenchConfig:
     refine_overrides: dict = field(default_factory=dict)
     """``RefineConfig`` fields changed for variant (e)'s refinement (``--refine-set
     NAME=VALUE``)."""
-    calibrate_iterations: int = 6
+    calibrate_iterations: int = 10
     """Variant (d)'s force calibration (``retarget.force_calibration``,
     ``ForceCalibrationConfig.iterations``, as ``retarget run --forces``): 0 re-simulates the
     planned commands only."""
@@ -1840,10 +1840,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--calibrate-iterations",
         type=int,
-        default=6,
+        default=10,  # BenchConfig.calibrate_iterations
         metavar="N",
         help="variant (d)'s force calibration: re-simulations correcting the commands until "
-        "the fingers press like the human's (default 6; 0: the planned commands)",
+        "the fingers press like the human's (default 10; 0: the planned commands)",
     )
     ap.add_argument(
         "--human-cache",

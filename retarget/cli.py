@@ -169,10 +169,10 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--calibrate-iterations",
         type=_non_negative_int,
-        default=6,  # RunConfig.calibrate_iterations
+        default=10,  # RunConfig.calibrate_iterations
         metavar="N",
         help="with --forces: re-simulations correcting the commands until the fingers press "
-        "like the human's (force calibration; default 6; 0: the planned commands)",
+        "like the human's (force calibration; default 10; 0: the planned commands)",
     )
     p.add_argument(
         "--refine-retries",

@@ -55,7 +55,7 @@ class RunConfig:
     result."""
     refine_retries: int = 4
     """How often the refinement backtracks when it loses the object (``RefineConfig.retries``)."""
-    calibrate_iterations: int = 6
+    calibrate_iterations: int = 10
     """``forces``: corrected re-simulations of the force calibration
     (``retarget.force_calibration``: the servo commands corrected in re-simulation until the
     fingers press like the human's; the written commands and the reported result are the

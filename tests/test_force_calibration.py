@@ -17,6 +17,8 @@ from retarget.force_calibration import (
     calibrate_forces,
     correction,
     force_error,
+    match_error,
+    profile_correlation,
 )
 from retarget.force_matching import squeeze_offsets
 
@@ -105,6 +107,31 @@ def test_force_error_is_the_pooled_relative_error_of_the_loaded_fingers():
         ForceCalibrationConfig(iterations=-1).validate()
 
 
+def test_match_error_adds_the_profile_mismatch_to_the_magnitude_error():
+    """The calibration's choice: pooled magnitude error plus 1 − the mean whole-clip
+    correlation over the loaded fingers. Twice the human's force in step with it scores 1 + 0;
+    the right mean force a quarter-period late scores its magnitude error + 1 − its correlation;
+    a finger the human never loads counts in neither."""
+    t = np.linspace(0, 2 * np.pi, 200)
+    H = np.zeros((200, 2))
+    H[:, 0] = 1.0 + np.sin(t)
+    R = 2 * H.copy()
+    R[:, 1] = 3.0  # unloaded by the human: not scored
+    assert profile_correlation(H, R) == pytest.approx(1.0)
+    assert match_error(force_error(H, R), profile_correlation(H, R)) == pytest.approx(1.0)
+    late = np.zeros_like(H)
+    late[:, 0] = 1.0 + np.cos(t)
+    c = float(np.corrcoef(H[:, 0], late[:, 0])[0, 1])
+    assert abs(c) < 0.05 and profile_correlation(H, late) == pytest.approx(c)
+    assert match_error(force_error(H, late), c) == pytest.approx(force_error(H, late) + 1 - c)
+    # (T, F, 3) forces score as their magnitudes
+    H3 = np.zeros((200, 2, 3))
+    H3[..., 2] = H
+    assert profile_correlation(H3, 2 * H3) == pytest.approx(1.0)
+    assert profile_correlation(np.zeros((5, 2)), np.ones((5, 2))) is None
+    assert match_error(None, None) == np.inf
+
+
 @pytest.fixture(scope="module")
 def shadow_force_matched():
     """Shadow force-matched on the built-in cube2/tripod, the human's forces from the force
@@ -141,10 +168,14 @@ def test_calibration_presses_closer_to_the_human_and_keeps_the_object(shadow_for
     assert len(its) == 4 and its[0].force_error is not None
     assert cal.success and its[cal.chosen].success
     ok = [k for k, it in enumerate(its) if it.success]
-    assert cal.chosen == min(ok, key=lambda k: its[k].force_error)
+    scores = [its[k].force_error + 1 - its[k].profile_correlation for k in ok]
+    assert cal.chosen == ok[int(np.argmin(scores))]
     assert cal.chosen > 0 and its[cal.chosen].force_error < 0.9 * its[0].force_error
     before = force_metrics(robot, sim0, human, rt)["force_profile_correlation_mean"]
     after = force_metrics(robot, cal.sim, human, rt)["force_profile_correlation_mean"]
+    # each iterate's correlation is the one metrics.json reports for it
+    assert its[0].profile_correlation == pytest.approx(before)
+    assert its[cal.chosen].profile_correlation == pytest.approx(after)
     assert after >= before - 0.01
     again = resim.run(cal.commands, human)
     np.testing.assert_allclose(again.finger_force_world, cal.sim.finger_force_world)

@@ -412,16 +412,17 @@ def test_cli_run_forces_reports_force_preservation(human_with_forces, tmp_path):
         assert m[key] is not None and np.isfinite(m[key])
     assert set(m["force_per_finger"]) == {"thumb", "index", "middle", "ring"}
     assert 0.0 <= m["contact_recall"] <= 1.0
-    # Force calibration (6 re-simulations by default): the written commands are the chosen
+    # Force calibration (10 re-simulations by default): the written commands are the chosen
     # iterate's, the planned ones kept beside them; the result reported is the chosen one's.
     cal = m["calibration"]
-    assert len(cal["iterates"]) == 7 and 0 <= cal["chosen_iterate"] <= 6
+    assert len(cal["iterates"]) == 11 and 0 <= cal["chosen_iterate"] <= 10
     chosen = cal["iterates"][cal["chosen_iterate"]]
     assert chosen["success"] == m["success"]
     assert chosen["object_pos_err_max_m"] == pytest.approx(m["object_pos_err_max_m"])
     if cal["iterates"][0]["success"]:  # calibration never loses a kept object
         assert m["success"]
-        assert cal["force_error_after"] <= cal["force_error_before"]
+        assert cal["match_error_after"] <= cal["match_error_before"]
+        assert chosen["profile_correlation"] == pytest.approx(m["force_profile_correlation_mean"])
     with np.load(out / "robot_trajectory.npz") as z:
         dq = z["q_command"] - z["q_command_planned"]
     assert np.all(dq[:, :6] == 0.0)  # the wrist is not calibrated

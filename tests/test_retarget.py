@@ -436,7 +436,7 @@ def test_cli_run_defaults_are_the_run_config_defaults():
     assert ref.refine_retries == RefineConfig().retries == 4
     from retarget.force_calibration import ForceCalibrationConfig
 
-    assert ref.calibrate_iterations == ForceCalibrationConfig().iterations == 6
+    assert ref.calibrate_iterations == ForceCalibrationConfig().iterations == 10
 
 
 def test_cli_run_pair_missing_from_dataset(small_dataset, capsys):
