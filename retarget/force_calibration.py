@@ -26,7 +26,10 @@ iterates): choosing by the force error alone, 6 iterates, gives whole-clip corre
 and force error 0.330 (the means over the lifted runs); by :func:`match_error`, 0.804 and
 0.333; with 10 iterates 0.799 / 0.319 by the force error and 0.810 / 0.322 by
 :func:`match_error` (the default); 12 iterates add 0.002. More iterates never lose a lift, since
-the first ones are the same and the chosen one keeps the object.
+the first ones are the same and the chosen one keeps the object. The choice fits the sample of
+the human's forces it is given: against a second sample of the same demonstrations (the force
+pipeline at another MPC seed, 74 of the runs) the chosen iterates correlate at 0.715 before and
+0.720 now, against the given sample 0.799 and 0.816.
 """
 
 from __future__ import annotations

@@ -804,7 +804,9 @@ def _print_summary(m: dict, out_dir: Path) -> None:
             "force calibration",
             f"iterate {c['chosen_iterate']} of {len(c['iterates']) - 1} (the plan {planned} the "
             f"object); force error {_num(c['force_error_before'])} → "
-            f"{_num(c['force_error_after'])}; commands moved "
+            f"{_num(c['force_error_after'])}, correlation "
+            f"{_num(c.get('profile_correlation_before'))} → "
+            f"{_num(c.get('profile_correlation_after'))}; commands moved "
             f"{np.degrees(c['finger_cmd_deviation_mean_rad']):.2f}° (fingers); "
             f"{c['compute_s']:.1f} s",
         )
