@@ -163,8 +163,9 @@ def match_error(force_error: float | None, profile_correlation: float | None) ->
     """How far an iterate's forces are from the human's, the calibration's choice: the pooled
     magnitude error (:func:`force_error`) plus ``1 −`` the profile correlation
     (:func:`profile_correlation`), both 0 for a perfect match; ``inf`` when the human loads no
-    finger. The force error alone is dominated by the heavily loaded fingers and is blind to
-    timing; the correlation weighs every loaded finger alike (module doc: measured)."""
+    finger. The force error alone is dominated by the fingers that carry the load, so a light
+    touch pressing at the wrong moments barely moves it; the correlation weighs every loaded
+    finger alike (module doc: measured)."""
     if force_error is None:
         return np.inf
     return float(force_error + 1.0 - (profile_correlation or 0.0))
