@@ -1845,10 +1845,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--calibrate-iterations",
         type=int,
-        default=10,  # BenchConfig.calibrate_iterations
+        default=BenchConfig.calibrate_iterations,
         metavar="N",
         help="variant (d)'s force calibration: re-simulations correcting the commands until "
-        "the fingers press like the human's (default 10; 0: the planned commands)",
+        f"the fingers press like the human's (default {BenchConfig.calibrate_iterations}; 0: "
+        "the planned commands)",
     )
     ap.add_argument(
         "--human-cache",

@@ -22,6 +22,15 @@ def traj():
     return next(t for t in example_trajectories(seed=0) if t.scene == "cube2").slice(100, 160)
 
 
+def test_calibration_iterations_default_as_retarget_run_forces():
+    """(d) is calibrated as ``retarget run --forces`` is: the same number of iterates."""
+    from retarget.force_calibration import ForceCalibrationConfig
+    from retarget.run import RunConfig
+
+    n = ForceCalibrationConfig().iterations
+    assert fp.BenchConfig.calibrate_iterations == RunConfig.calibrate_iterations == n
+
+
 def test_cache_key_follows_the_demonstration_object_and_tracker(traj):
     key = fp.human_cache_key(traj, "cube2", "mpc")
     assert key == fp.human_cache_key(traj, "cube2", "mpc")  # stable
