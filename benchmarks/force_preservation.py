@@ -134,7 +134,7 @@ from _common import (
 from force_pipeline import _init_worker, _one_thread_env
 
 from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S
-from retarget.run import FORCE_CONTACT_TIMECONST, HUMAN_REPLAY_SEED, human_sim_config
+from retarget.run import FORCE_CONTACT_TIMECONST, HUMAN_REPLAY_SEED, RunConfig, human_sim_config
 
 DEFAULT_OUT = Path(__file__).parent / "results" / "force_preservation.json"
 NOT_REQUESTED = "not requested (--variants)"
@@ -208,7 +208,7 @@ class BenchConfig:
     refine_overrides: dict = field(default_factory=dict)
     """``RefineConfig`` fields changed for variant (e)'s refinement (``--refine-set
     NAME=VALUE``)."""
-    calibrate_iterations: int = 10
+    calibrate_iterations: int = RunConfig.calibrate_iterations
     """Variant (d)'s force calibration (``retarget.force_calibration``,
     ``ForceCalibrationConfig.iterations``, as ``retarget run --forces``): 0 re-simulates the
     planned commands only."""

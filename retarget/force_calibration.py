@@ -137,11 +137,15 @@ def human_target(robot, force_scale: float = 1.0) -> np.ndarray:
     return force_scale * np.asarray(robot.human_force, dtype=np.float64)
 
 
+def _magnitudes(X: np.ndarray) -> np.ndarray:
+    """(T, F) force magnitudes of (T, F, 3) forces; (T, F) magnitudes as they are."""
+    return np.linalg.norm(X, axis=2) if np.ndim(X) == 3 else np.asarray(X)
+
+
 def force_error(H: np.ndarray, R: np.ndarray) -> float | None:
     """``Σ |‖R‖ − ‖H‖| / Σ ‖H‖`` over the fingers the human loads (above 0.05 N on more than 2
     frames; ``H``, ``R``: (T, F, 3) [N] or (T, F) magnitudes); ``None`` when it loads none."""
-    Hn = np.linalg.norm(H, axis=2) if np.ndim(H) == 3 else np.asarray(H)
-    Rn = np.linalg.norm(R, axis=2) if np.ndim(R) == 3 else np.asarray(R)
+    Hn, Rn = _magnitudes(H), _magnitudes(R)
     used = (Hn > 0.05).sum(axis=0) > 2
     if not used.any():
         return None
@@ -153,8 +157,7 @@ def profile_correlation(H: np.ndarray, R: np.ndarray) -> float | None:
     force magnitudes with the human's (``force_profile_correlation_mean`` of
     ``retarget.run.force_metrics``, which scores the chosen iterate; ``H``, ``R``: (T, F, 3)
     [N] or (T, F) magnitudes); ``None`` when the human loads no finger."""
-    Hn = np.linalg.norm(H, axis=2) if np.ndim(H) == 3 else np.asarray(H)
-    Rn = np.linalg.norm(R, axis=2) if np.ndim(R) == 3 else np.asarray(R)
+    Hn, Rn = _magnitudes(H), _magnitudes(R)
     per = finger_force_profiles(Hn, Rn, [str(i) for i in range(Hn.shape[1])])
     return correlation_means(per)["force_profile_correlation_mean"]
 
