@@ -14,6 +14,7 @@ from pathlib import Path
 
 from dexcanvas_core import __version__
 from dexcanvas_core.errors import DexCanvasError
+from dexcanvas_core.objects.options import add_object_options, use_object_options
 
 
 def _human_bytes(n: int) -> str:
@@ -293,6 +294,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--seed", type=int, default=0)
     b.add_argument("--workers", type=int, default=1, help="generator processes")
     b.add_argument("--overwrite", action="store_true")
+    add_object_options(b)
 
     s = sub.add_parser("fit", help="fit MANO hand + object poses to mocap markers (C3D or CSV)")
     s.add_argument("markers", type=Path, help="marker file (.c3d or .csv)")
@@ -320,6 +322,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--object", default=None, help="simulate another catalogue object (cube2h for a cube2 demo)"
     )
     s.add_argument("--no-plot", action="store_true", help="skip the per-finger force PNG")
+    add_object_options(s)
     _add_tracker_args(s)
 
     s = sub.add_parser(
@@ -345,6 +348,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="object-only offset from the hand [m]")  # fmt: skip
     g.add_argument("--object-offset-yaw-deg", type=float,
                    default=float(np.rad2deg(d.object_offset_yaw_rad)))  # fmt: skip
+    add_object_options(s)
     _add_tracker_args(s)
 
     s = sub.add_parser("example", help="write the built-in synthetic example dataset")
@@ -360,6 +364,7 @@ def main(argv: list[str] | None = None) -> int:
         level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(message)s"
     )
     try:
+        use_object_options(args)
         if args.command == "info":
             run_info(InfoConfig(args.path, args.json))
         elif args.command == "validate":

@@ -16,14 +16,14 @@ class DexCanvasError(Exception):
 class UnknownNameError(DexCanvasError, KeyError):
     """A name (object, manipulation type, operator, hand, …) that is not in its catalogue."""
 
-    def __init__(self, kind: str, name: object, valid: Iterable[str]):
+    def __init__(self, kind: str, name: object, valid: Iterable[str], hint: str = ""):
         self.kind = kind
         self.name = name
         self.valid = sorted(valid)
         close = difflib.get_close_matches(str(name), self.valid, n=3, cutoff=0.5)
-        hint = f"; did you mean {', '.join(repr(c) for c in close)}?" if close else ""
+        near = f"; did you mean {', '.join(repr(c) for c in close)}?" if close else ""
         listed = ", ".join(self.valid)
-        super().__init__(f"unknown {kind} {name!r}{hint} (available: {listed})")
+        super().__init__(f"unknown {kind} {name!r}{near} (available: {listed}){hint}")
 
     def __str__(self) -> str:  # KeyError quotes its message; keep it readable.
         return str(self.args[0])

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from dexcanvas_core.errors import DexCanvasError
+from dexcanvas_core.objects.options import add_object_options, use_object_options
 from retarget import __version__
 from retarget.errors import RetargetError
 from retarget.overrides import parse_override
@@ -521,8 +522,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     for name, cmd in COMMANDS.items():
-        cmd.add_arguments(sub.add_parser(name, help=cmd.help, description=cmd.help))
+        s = sub.add_parser(name, help=cmd.help, description=cmd.help)
+        cmd.add_arguments(s)
+        if name in SCENE_COMMANDS:
+            add_object_options(s)
     return p
+
+
+SCENE_COMMANDS = ("run", "snapshot", "report", "calibrate-wrist")
+"""Sub-commands that build object scenes: they take ``--objects`` and ``--objects-dir``."""
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -536,6 +544,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     cmd = COMMANDS[args.command]
     try:
+        use_object_options(args)
         result = cmd.run(cmd.make_config(args))
     except (RetargetError, DexCanvasError) as e:
         print(f"retarget {args.command}: error: {e}", file=sys.stderr)

@@ -1048,11 +1048,7 @@ class Retargeter:
         return servo_gains(self.scene.model, self.nq)
 
     def _object_com(self) -> np.ndarray:
-        from dexcanvas_core.sim.scene import primitive_volume
-
-        vols = np.array([primitive_volume(p.type, p.size) for p in self.geometry.primitives])
-        cents = np.array([p.pos for p in self.geometry.primitives])
-        return (vols[:, None] * cents).sum(0) / vols.sum()
+        return self.geometry.com
 
     def _grip_targets(self, traj: Trajectory) -> dict:
         """Per-frame object wrench the hand must supply: ``λ m (a + g ẑ)`` and no torque about

@@ -515,7 +515,7 @@ def retarget_config(cfg: RunConfig):
 
 def run_retarget(cfg: RunConfig) -> dict:
     """Retarget, re-simulate and write the outputs; return the metrics dict."""
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.demos.geometry import object_geometry, object_record
     from dexcanvas_core.taxonomy import Pair
     from retarget.hands import get_hand
     from retarget.retargeter import Retargeter
@@ -596,6 +596,8 @@ def run_retarget(cfg: RunConfig) -> dict:
         "retarget_config": asdict(retargeter.cfg),
         "retarget_overrides": dict(cfg.overrides),
         "demonstration_of": substituted or str(pair),
+        "object": object_record(pair.object.id),
+        "approximate_object": bool(geometry.approximate),
         "forces": cfg.forces,
         "force_scale": cfg.force_scale if cfg.forces else None,
     }
@@ -728,6 +730,22 @@ def contact_error_per_finger(contact_err: np.ndarray, fingers: list[str]) -> dic
     return out
 
 
+def _object_cell(rec: dict | None) -> str:
+    """The summary's object row: id, mass, size and where the shape came from."""
+    if not rec:
+        return "—"
+    size = " × ".join(f"{100 * v:.1f}" for v in rec["size_m"])
+    text = f"{rec['id']}: {1000 * rec['mass_kg']:.0f} g, {size} cm, {rec['shape_source']}"
+    if rec.get("mesh"):
+        text += f" ({Path(rec['mesh']).name})"
+    if rec.get("approximate"):
+        text += (
+            " [yellow](approximate: a stand-in for the real object; give its model with "
+            "--objects-dir)[/yellow]"
+        )
+    return text
+
+
 def _print_summary(m: dict, out_dir: Path) -> None:
     from rich.console import Console
     from rich.table import Table
@@ -742,6 +760,7 @@ def _print_summary(m: dict, out_dir: Path) -> None:
         f"{100 * m['object_pos_err_mean_m']:.1f} cm  (success: every frame ≤ 5 cm)",
     )
     t.add_row("object rotation error mean", f"{np.degrees(m['object_rot_err_mean_rad']):.1f}°")
+    t.add_row("object", _object_cell(m.get("object")))
     t.add_row("loose rule (mean < 10 cm, < 0.5 rad)", "yes" if m["success_loose"] else "no")
     t.add_row("keypoint error mean", f"{1000 * m['keypoint_err_mean_m']:.1f} mm")
     if m["contact_err_mean_m"] is not None:

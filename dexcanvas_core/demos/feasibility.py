@@ -69,7 +69,7 @@ class ObjectTraits:
 
 
 def object_traits(object_id: str) -> ObjectTraits:
-    """The :class:`ObjectTraits` of a catalogue object."""
+    """The :class:`ObjectTraits` of an object (a catalogue object, or one given by a mesh)."""
     from dexcanvas_core.taxonomy import object_spec
 
     spec = object_spec(object_id)
@@ -285,6 +285,8 @@ def feasible_pairs() -> list[Pair]:
 def feasibility(pair: str | Pair) -> Feasibility:
     """The table entry of one pair (``"cube2/tripod"`` or a :class:`Pair`)."""
     p = pair if isinstance(pair, Pair) else Pair.parse(pair)
+    if p.object.mesh is not None:  # a model given by the user: judged on its own shape
+        return RULES[p.manipulation_type.name](object_traits(p.object.id))
     return feasibility_table()[(p.object.id, p.manipulation_type.name)]
 
 

@@ -26,21 +26,30 @@ penetration check). Normals are the gradient of the minimising primitive's dista
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import lru_cache
+from pathlib import Path
 from typing import Literal
 
 import numpy as np
 
 from dexcanvas_core.errors import ValidationError
+from dexcanvas_core.objects.mesh import (
+    ConvexPart,
+    ObjectMesh,
+    SdfGrid,
+    load_object_mesh,
+    mesh_collision,
+)
 from dexcanvas_core.rotations import aa_to_matrix, matrix_to_aa
 from dexcanvas_core.taxonomy import ObjectSpec, object_spec
 
-PrimitiveType = Literal["box", "cylinder", "sphere", "capsule"]
-PRIMITIVE_TYPES: tuple[str, ...] = ("box", "cylinder", "sphere", "capsule")
-_SIZE_LEN = {"box": 3, "cylinder": 2, "sphere": 1, "capsule": 2}
+PrimitiveType = Literal["box", "cylinder", "sphere", "capsule", "mesh"]
+PRIMITIVE_TYPES: tuple[str, ...] = ("box", "cylinder", "sphere", "capsule", "mesh")
+_SIZE_LEN = {"box": 3, "cylinder": 2, "sphere": 1, "capsule": 2, "mesh": 3}
 _EPS = 1e-12
 
 
@@ -49,11 +58,15 @@ class Primitive:
     """One solid primitive of an object, posed in the object frame.
 
     Attributes:
-        type: ``"box"``, ``"cylinder"``, ``"sphere"`` or ``"capsule"``.
-        size: half sizes [m] in MuJoCo's layout (see the module docstring).
-        pos: ``(3,)`` position of the primitive's centre in the object frame [m].
+        type: ``"box"``, ``"cylinder"``, ``"sphere"``, ``"capsule"`` or ``"mesh"`` (a convex
+            part of a mesh object, :class:`~dexcanvas_core.objects.mesh.ConvexPart`).
+        size: half sizes [m] in MuJoCo's layout (see the module docstring); for a mesh part,
+            the half extents of its bounding box.
+        pos: ``(3,)`` position of the primitive's centre in the object frame [m] (a mesh
+            part's vertices are in the object frame: its pos is the origin).
         rot_aa: ``(3,)`` orientation of the primitive frame in the object frame, axis-angle [rad].
         name: a label (``"body"``, ``"cap"``, …).
+        part: the convex part of a ``"mesh"`` primitive, ``None`` otherwise.
     """
 
     type: PrimitiveType
@@ -61,6 +74,13 @@ class Primitive:
     pos: tuple[float, float, float] = (0.0, 0.0, 0.0)
     rot_aa: tuple[float, float, float] = (0.0, 0.0, 0.0)
     name: str = ""
+    part: ConvexPart | None = field(default=None, compare=False, repr=False)
+
+    @classmethod
+    def from_part(cls, part: ConvexPart, name: str = "") -> Primitive:
+        """A ``"mesh"`` primitive of a convex part (vertices in the object frame)."""
+        half = 0.5 * (part.vertices.max(axis=0) - part.vertices.min(axis=0))
+        return cls("mesh", tuple(np.maximum(half, 1e-6)), name=name, part=part)
 
     def __post_init__(self) -> None:
         if self.type not in PRIMITIVE_TYPES:
@@ -74,9 +94,32 @@ class Primitive:
                 f"a {self.type} needs {_SIZE_LEN[self.type]} positive half sizes [m], got {size}",
                 field="size",
             )
+        if (self.type == "mesh") != (self.part is not None):
+            raise ValidationError("a mesh primitive needs its convex part, and only it has one")
         object.__setattr__(self, "size", size)
         object.__setattr__(self, "pos", tuple(float(v) for v in self.pos))
         object.__setattr__(self, "rot_aa", tuple(float(v) for v in self.rot_aa))
+
+    @property
+    def volume(self) -> float:
+        """Solid volume [m³]."""
+        s = self.size
+        if self.type == "box":
+            return 8.0 * s[0] * s[1] * s[2]
+        if self.type == "sphere":
+            return 4.0 / 3.0 * math.pi * s[0] ** 3
+        if self.type == "cylinder":
+            return math.pi * s[0] ** 2 * 2.0 * s[1]
+        if self.type == "capsule":
+            return math.pi * s[0] ** 2 * 2.0 * s[1] + 4.0 / 3.0 * math.pi * s[0] ** 3
+        return self.part.volume_m3
+
+    @property
+    def centroid(self) -> np.ndarray:
+        """``(3,)`` centre of volume in the object frame [m]."""
+        if self.type == "mesh":
+            return self.part.centroid
+        return np.asarray(self.pos, dtype=np.float64)
 
     @property
     def R(self) -> np.ndarray:
@@ -86,6 +129,8 @@ class Primitive:
     def local_aabb_half(self) -> np.ndarray:
         """``(3,)`` half extents of the primitive's bounding box in its own frame [m]."""
         s = self.size
+        if self.type == "mesh":  # about the object frame's origin, where the part's pos is
+            return np.abs(self.part.vertices).max(axis=0)
         if self.type == "box":
             return np.array(s)
         if self.type == "sphere":
@@ -96,6 +141,8 @@ class Primitive:
 
     def aabb(self) -> tuple[np.ndarray, np.ndarray]:
         """``(lo, hi)`` axis-aligned bounds in the object frame [m] (tight for all four types)."""
+        if self.type == "mesh":
+            return self.part.vertices.min(axis=0), self.part.vertices.max(axis=0)
         R = self.R
         c = np.asarray(self.pos)
         s = self.size
@@ -113,13 +160,16 @@ class Primitive:
         return c - half, c + half
 
     def to_dict(self) -> dict:
-        return {
+        out = {
             "type": self.type,
             "size": list(self.size),
             "pos": list(self.pos),
             "rot_aa": list(self.rot_aa),
             "name": self.name,
         }
+        if self.part is not None:
+            out["vertices"] = len(self.part.vertices)
+        return out
 
 
 def _sdf_local(kind: str, size: tuple[float, ...], p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -180,10 +230,22 @@ class ObjectGeometry:
 
     Attributes:
         object_id: catalogue id (``"cube2"``).
-        primitives: the composition, each posed in the object frame.
+        primitives: the composition, each posed in the object frame (a mesh object: its convex
+            parts, ``"mesh"`` primitives).
         mass_kg: the catalogue mass [kg].
         rest_z: height [m] of the object frame's origin above the table when the object rests.
         description: how the composition was built and from what.
+        sdf_grid: a mesh object's signed-distance grid (distances then come from it, not from
+            the primitives); ``None`` for primitive compositions.
+        visual: a mesh object's drawn surface, ``(vertices (V, 3) [m], faces (F, 3))`` in the
+            object frame; ``None`` for primitive compositions (drawn as their primitives).
+        friction: sliding friction coefficient of the object's surface; ``None``: the scene's
+            default.
+        inertia_diag: principal moments of inertia [kg·m²] about the centre of mass along the
+            object frame's axes, when given; ``None``: computed from the shape and mass with
+            uniform density.
+        approximate: the shape stands in for a real object (a built-in composition of a
+            YCB-style item, not its model).
     """
 
     object_id: str
@@ -191,6 +253,11 @@ class ObjectGeometry:
     mass_kg: float
     rest_z: float
     description: str
+    sdf_grid: SdfGrid | None = field(default=None, repr=False, compare=False)
+    visual: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False, compare=False)
+    friction: float | None = None
+    inertia_diag: tuple[float, float, float] | None = None
+    approximate: bool = False
     _R: np.ndarray = field(init=False, repr=False, compare=False)
     _c: np.ndarray = field(init=False, repr=False, compare=False)
     _rho: np.ndarray = field(init=False, repr=False, compare=False)
@@ -198,6 +265,11 @@ class ObjectGeometry:
     def __post_init__(self) -> None:
         if not self.primitives:
             raise ValidationError(f"object {self.object_id!r} has no primitive", field="primitives")
+        if self.sdf_grid is None and any(p.type == "mesh" for p in self.primitives):
+            raise ValidationError(
+                f"object {self.object_id!r}: mesh parts need the object's signed-distance grid",
+                field="sdf_grid",
+            )
         object.__setattr__(self, "primitives", tuple(self.primitives))
         R = np.stack([p.R for p in self.primitives])  # (P, 3, 3) primitive → object
         c = np.stack([np.asarray(p.pos) for p in self.primitives])  # (P, 3)
@@ -219,6 +291,9 @@ class ObjectGeometry:
             raise ValidationError(f"points must have shape (..., 3), got {p.shape}", field="points")
         lead = p.shape[:-1]
         flat = p.reshape(-1, 3)
+        if self.sdf_grid is not None:
+            d, g = self.sdf_grid.sdf_and_normal(flat)
+            return d.reshape(lead), g.reshape((*lead, 3))
         prims = self.primitives
         if len(prims) == 1:
             d, g = _sdf_local(prims[0].type, prims[0].size, (flat - self._c[0]) @ self._R[0])
@@ -262,6 +337,30 @@ class ObjectGeometry:
         lo, hi = _aabb(self.primitives)
         return 0.5 * (hi - lo)
 
+    @property
+    def aabb_center(self) -> np.ndarray:
+        """``(3,)`` centre [m] of the bounding box in the object frame (the origin for the
+        built-in compositions; a mesh keeps its own frame)."""
+        lo, hi = _aabb(self.primitives)
+        return 0.5 * (hi + lo)
+
+    @property
+    def is_mesh(self) -> bool:
+        """The object is a mesh (convex parts and a signed-distance grid)."""
+        return self.sdf_grid is not None
+
+    @property
+    def volume_m3(self) -> float:
+        """Sum of the primitives' volumes [m³] (overlaps counted twice)."""
+        return float(sum(p.volume for p in self.primitives))
+
+    @property
+    def com(self) -> np.ndarray:
+        """``(3,)`` centre of mass [m] in the object frame, uniform density over primitives."""
+        vols = np.array([p.volume for p in self.primitives])
+        cents = np.array([p.centroid for p in self.primitives])
+        return (vols[:, None] * cents).sum(0) / vols.sum()
+
     def lowest_z(self, R_world_obj: np.ndarray, p_world_obj: np.ndarray) -> np.ndarray:
         """Lowest world z [m] of the posed object; ``R (..., 3, 3)``, ``p (..., 3)`` → ``(...)``."""
         R = np.asarray(R_world_obj, dtype=np.float64)
@@ -272,6 +371,10 @@ class ObjectGeometry:
             cz = p[..., 2] + (R @ np.asarray(prim.pos))[..., 2]
             row = Rp[..., 2, :]  # world z of the primitive's axes
             s = prim.size
+            if prim.type == "mesh":
+                low_p = p[..., 2] + (row @ prim.part.vertices.T).min(axis=-1)
+                low = low_p if low is None else np.minimum(low, low_p)
+                continue
             if prim.type == "box":
                 ext = np.abs(row) @ np.asarray(s)
             elif prim.type == "sphere":
@@ -302,16 +405,26 @@ class ObjectGeometry:
             raise ValidationError(f"scale factor must be positive, got {factor!r}", field="scale")
         prims = tuple(
             dataclasses.replace(
-                p, size=tuple(s * factor for s in p.size), pos=tuple(v * factor for v in p.pos)
+                p,
+                size=tuple(s * factor for s in p.size),
+                pos=tuple(v * factor for v in p.pos),
+                part=None if p.part is None else p.part.scaled(factor),
             )
             for p in self.primitives
         )
-        return ObjectGeometry(
-            object_id=self.object_id,
+        mass = self.mass_kg if mass_kg is None else float(mass_kg)
+        inertia = None
+        if self.inertia_diag is not None:  # I ∝ m·L²
+            inertia = tuple(i * factor**2 * mass / self.mass_kg for i in self.inertia_diag)
+        return dataclasses.replace(
+            self,
             primitives=prims,
-            mass_kg=self.mass_kg if mass_kg is None else float(mass_kg),
+            mass_kg=mass,
             rest_z=self.rest_z * factor,
             description=f"{self.description} (scaled x{factor:.3f})",
+            sdf_grid=None if self.sdf_grid is None else self.sdf_grid.scaled(factor),
+            visual=None if self.visual is None else (self.visual[0] * factor, self.visual[1]),
+            inertia_diag=inertia,
         )
 
     def to_dict(self) -> dict:
@@ -322,6 +435,7 @@ class ObjectGeometry:
             "rest_z": self.rest_z,
             "aabb_half": self.aabb_half.tolist(),
             "description": self.description,
+            "approximate": self.approximate,
             "primitives": [p.to_dict() for p in self.primitives],
         }
 
@@ -566,22 +680,90 @@ def _primitive_composition(spec: ObjectSpec) -> tuple[list[Primitive], str]:
     )
 
 
+def mesh_object_geometry(
+    object_id: str,
+    mesh: ObjectMesh,
+    mass_kg: float,
+    *,
+    friction: float | None = None,
+    inertia_diag: tuple[float, float, float] | None = None,
+) -> ObjectGeometry:
+    """The geometry of an object given as a mesh (its own frame is the object frame).
+
+    Collision parts and the signed-distance grid come from :func:`mesh_collision` (cached on
+    disk by the mesh's content hash); the object rests with its lowest point on the table.
+    """
+    col = mesh_collision(mesh)
+    prims = tuple(Primitive.from_part(p, name=f"part{i}") for i, p in enumerate(col.parts))
+    low = min(float(p.vertices[:, 2].min()) for p in col.parts)
+    ext = " × ".join(f"{v * 1e3:.0f}" for v in mesh.extent_m)
+    how = "convex, used as it is" if mesh.convex else f"{len(prims)} convex parts (coacd)"
+    text = f"mesh {Path(mesh.source).name}, {ext} mm, {how}; mass {mass_kg:g} kg"
+    return ObjectGeometry(
+        object_id,
+        prims,
+        float(mass_kg),
+        -low,
+        text,
+        sdf_grid=col.sdf,
+        visual=(mesh.vertices, mesh.faces),
+        friction=friction,
+        inertia_diag=inertia_diag,
+    )
+
+
 @lru_cache(maxsize=64)
-def _build(object_id: str) -> ObjectGeometry:
-    spec = object_spec(object_id)
+def _build(spec: ObjectSpec) -> ObjectGeometry:
+    if spec.mesh is not None:
+        mesh = load_object_mesh(spec.mesh, spec.mesh_scale)
+        return mesh_object_geometry(
+            spec.id, mesh, spec.mass_kg, friction=spec.friction, inertia_diag=spec.inertia_diag
+        )
     if spec.source == "ycb":
         prims, text = _YCB_BUILDERS[spec.id]()
     else:
         prims, text = _primitive_composition(spec)
     centred, rest_z = _centred(prims)
     text = f"{text}; mass {spec.mass_kg:g} kg (catalogue)"
-    return ObjectGeometry(spec.id, centred, spec.mass_kg, rest_z, text)
+    return ObjectGeometry(
+        spec.id, centred, spec.mass_kg, rest_z, text, approximate=spec.approximate
+    )
+
+
+def object_record(object_id: str | ObjectSpec) -> dict:
+    """What an output says about the object it used (JSON-ready): id, mass [kg], bounding box
+    [m], where the shape came from (``"primitive"``, ``"built-in composition"`` or
+    ``"mesh"``), the mesh file and its sha256 when there is one, and ``approximate`` — the shape
+    stands in for a real object whose model was not given."""
+    spec = object_spec(object_id)
+    geom = object_geometry(spec)
+    out = {
+        "id": spec.id,
+        "name": spec.name,
+        "mass_kg": geom.mass_kg,
+        "size_m": [float(v) for v in 2.0 * geom.aabb_half],
+        "shape_source": (
+            "mesh" if spec.mesh else "built-in composition" if spec.approximate else "primitive"
+        ),
+        "approximate": spec.approximate,
+        "description": geom.description,
+    }
+    if spec.mesh:
+        out["mesh"] = spec.mesh
+        out["mesh_scale"] = spec.mesh_scale
+        out["mesh_sha256"] = hashlib.sha256(Path(spec.mesh).read_bytes()).hexdigest()
+        out["convex_parts"] = len(geom.primitives)
+    return out
 
 
 def object_geometry(object_id: str | ObjectSpec) -> ObjectGeometry:
-    """The geometry of a catalogue object (any spelling ``object_spec`` accepts), cached.
+    """The geometry of an object (any spelling ``object_spec`` accepts, or a spec), cached.
+
+    Catalogue objects are built from primitives; objects with a mesh (custom objects, objects
+    read from an objects directory) from the mesh.
 
     Raises:
         UnknownNameError: unknown object (the message lists close matches).
+        ValidationError: the object's mesh cannot be used (unreadable, open, absurd scale).
     """
-    return _build(object_spec(object_id).id)
+    return _build(object_spec(object_id))

@@ -263,6 +263,7 @@ def _result(traj, cfg, geometry, ref, scene, env, log, cpu_s) -> SimResult:
         "compute_s": cpu_s,
         "compute_s_per_demo_s": cpu_s / max(T / fps, 1e-9),
         "mass_kg": m,
+        "approximate_object": bool(geometry.approximate),
         "newton_euler_sim_median": float(np.median(ne_sim)),
         "newton_euler_capture_median": float(np.median(ne_cap)),
         "newton_euler_capture_hold_median": float(np.median(ne_cap[hold])) if hold.any() else None,
@@ -312,6 +313,7 @@ def _annotate(traj, cfg, scene, ref, log, wrench, metrics) -> Trajectory:
     extras = dict(out.extras)
     extras["sim_object_pos"] = obj_pos.astype(np.float32).tolist()
     extras["sim_object_rot_aa"] = obj_aa.astype(np.float32).tolist()
+    extras["approximate_object"] = bool(metrics["approximate_object"])
     extras["sim_metrics"] = json.dumps(
         {k: v for k, v in metrics.items() if k != "config"}, sort_keys=True, default=float
     )

@@ -108,6 +108,13 @@ def print_summary(m: dict, out: Path) -> None:
         f"rotation mean {np.degrees(m['object_rot_err_mean_rad']):.1f}°",
     )
     t.add_row("loose rule (mean < 10 cm, < 0.5 rad)", "yes" if m["success_loose"] else "no")
+    obj = f"{1000 * m['mass_kg']:.0f} g"
+    if m.get("approximate_object"):
+        obj += (
+            " [yellow](approximate: a built-in stand-in for the real object; give its model "
+            "with --objects-dir)[/yellow]"
+        )
+    t.add_row("object mass", obj)
     if m["hold_weight_ratio"] is not None:
         t.add_row(
             "static hold",
@@ -166,6 +173,27 @@ def _synth_row(args) -> tuple[str, int, list[dict]]:
     return traj.uuid, len(kept), reports
 
 
+def check_objects_known(object_ids, dataset: str) -> None:
+    """Stop before any work when rows name objects that neither the catalogue nor the objects
+    in use (``--objects``, ``--objects-dir``) know, naming them and how to supply them."""
+    from dexcanvas_core.errors import UnknownNameError
+    from dexcanvas_core.taxonomy import object_spec
+
+    unknown = []
+    for oid in sorted(object_ids):
+        try:
+            object_spec(oid)
+        except UnknownNameError:
+            unknown.append(oid)
+    if unknown:
+        raise DatasetError(
+            f"rows name objects that are not in the catalogue: {', '.join(unknown)}; describe "
+            "them in an objects manifest (TOML: [<id>] mesh = 'path.obj', mass_kg = ...) and "
+            "pass it with --objects MANIFEST",
+            dataset=dataset,
+        )
+
+
 def run_synthesize(cfg: SynthesizeConfig) -> dict:
     """Expand ``dataset`` ``expand``× (module docstring); return a summary."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
@@ -179,8 +207,11 @@ def run_synthesize(cfg: SynthesizeConfig) -> dict:
     cfg.sim.validate()
     src = open_dataset(cfg.dataset)
     meta = src.scan_metadata()
-    uuids = [str(u) for u in meta.column("index").combine_chunks().field("uuid").to_pylist()]
+    index = meta.column("index").combine_chunks()
+    uuids = [str(u) for u in index.field("uuid").to_pylist()]
     positions = list(range(len(uuids)))[: cfg.limit]
+    scenes = index.field("scene").to_pylist()
+    check_objects_known({scenes[p] for p in positions if scenes[p]}, str(cfg.dataset))
     work = out.with_name(out.name + ".work")
     work.mkdir(parents=True, exist_ok=True)
     settings = {"dataset": str(cfg.dataset), "expand": cfg.expand, "seed": cfg.seed,

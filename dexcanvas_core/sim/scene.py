@@ -38,19 +38,6 @@ _MJ_GEOM = {
 }
 
 
-def primitive_volume(kind: str, size: tuple[float, ...]) -> float:
-    """Volume [m³] of a primitive given its MuJoCo half sizes."""
-    if kind == "box":
-        return 8.0 * size[0] * size[1] * size[2]
-    if kind == "sphere":
-        return 4.0 / 3.0 * np.pi * size[0] ** 3
-    if kind == "cylinder":
-        return np.pi * size[0] ** 2 * 2.0 * size[1]
-    if kind == "capsule":
-        return np.pi * size[0] ** 2 * 2.0 * size[1] + 4.0 / 3.0 * np.pi * size[0] ** 3
-    raise ValidationError(f"unknown primitive type {kind!r}", field="type")
-
-
 def add_object(
     spec: mujoco.MjSpec,
     geometry,
@@ -60,29 +47,57 @@ def add_object(
     rgba: tuple[float, float, float, float] = (0.85, 0.45, 0.2, 1.0),
     mass_kg: float | None = None,
 ) -> mujoco.MjsBody:
-    """Add the object body (``OBJECT_BODY``) with one geom per primitive.
+    """Add the object body (``OBJECT_BODY``) with one geom per primitive (a mesh object: one
+    mesh geom per convex part).
 
     ``mocap=True``: a kinematic mocap body (retargeting). ``False``: a free body whose geoms
-    carry the mass (``mass_kg``, default the catalogue mass) split by volume.
+    carry the mass (``mass_kg``, default the catalogue mass) split by volume, or, when the
+    geometry gives principal moments (``inertia_diag``), a body with that explicit inertia at
+    the volume centroid. The geometry's own ``friction`` (sliding), when set, replaces
+    ``friction[0]``.
     """
     body = spec.worldbody.add_body(name=OBJECT_BODY, mocap=mocap)
     if not mocap:
         body.add_freejoint(name="object_free")
     total = geometry.mass_kg if mass_kg is None else float(mass_kg)
-    vols = np.array([primitive_volume(p.type, p.size) for p in geometry.primitives])
+    vols = np.array([p.volume for p in geometry.primitives])
     masses = total * vols / vols.sum()
+    explicit = geometry.inertia_diag is not None and not mocap
+    if explicit:
+        body.explicitinertial = True
+        body.mass = total
+        body.ipos = list(geometry.com)
+        body.inertia = list(geometry.inertia_diag)
+    fr = list(friction)
+    if geometry.friction is not None:
+        fr[0] = float(geometry.friction)
     for i, (prim, mass) in enumerate(zip(geometry.primitives, masses, strict=True)):
-        size = list(prim.size) + [0.0] * (3 - len(prim.size))
-        g = body.add_geom(
-            name=f"object_{i}_{prim.name}" if prim.name else f"object_{i}",
-            type=_MJ_GEOM[prim.type],
-            size=size,
-            pos=list(prim.pos),
-            quat=list(aa_to_quat_wxyz(np.asarray(prim.rot_aa))),
-            rgba=list(rgba),
-            friction=list(friction),
-        )
-        g.mass = float(mass)
+        name = f"object_{i}_{prim.name}" if prim.name else f"object_{i}"
+        if prim.type == "mesh":
+            spec.add_mesh(
+                name=f"{name}_mesh",
+                uservert=prim.part.vertices.ravel().tolist(),
+                userface=prim.part.faces.ravel().tolist(),
+            )
+            g = body.add_geom(
+                name=name,
+                type=mujoco.mjtGeom.mjGEOM_MESH,
+                meshname=f"{name}_mesh",
+                rgba=list(rgba),
+                friction=fr,
+            )
+        else:
+            size = list(prim.size) + [0.0] * (3 - len(prim.size))
+            g = body.add_geom(
+                name=name,
+                type=_MJ_GEOM[prim.type],
+                size=size,
+                pos=list(prim.pos),
+                quat=list(aa_to_quat_wxyz(np.asarray(prim.rot_aa))),
+                rgba=list(rgba),
+                friction=fr,
+            )
+        g.mass = 0.0 if explicit else float(mass)
         g.contype = OBJECT_CONTYPE
         g.conaffinity = OBJECT_CONAFFINITY
         g.condim = 4

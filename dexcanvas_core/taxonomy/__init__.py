@@ -29,8 +29,11 @@ from dexcanvas_core.taxonomy.objects import (
     ObjectSpec,
     Shape,
     Source,
+    clear_objects,
+    custom_objects,
     heavy_variant,
     object_spec,
+    use_objects,
 )
 from dexcanvas_core.taxonomy.pair import Pair
 
@@ -49,8 +52,11 @@ __all__ = [
     "Shape",
     "Source",
     "Thumb",
+    "clear_objects",
+    "custom_objects",
     "heavy_variant",
     "manipulation_type",
     "object_spec",
     "types_in_group",
+    "use_objects",
 ]

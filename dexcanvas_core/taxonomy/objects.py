@@ -32,15 +32,27 @@ Provenance, field by field, is in every entry's ``data_source``. In short:
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Literal, get_args
 
 from dexcanvas_core.errors import UnknownNameError, ValidationError
+from dexcanvas_core.objects.manifest import (
+    MANIFEST_ENV,
+    OBJECTS_DIR_ENV,
+    check_inertia,
+    check_mass,
+    objects_dir_meshes,
+    read_manifest,
+)
+from dexcanvas_core.objects.mesh import load_object_mesh
 from dexcanvas_core.taxonomy._lookup import build_index, lookup
 
-Shape = Literal["cube", "cuboid", "cylinder", "sphere", "ycb"]
-Source = Literal["primitive", "ycb"]
+Shape = Literal["cube", "cuboid", "cylinder", "sphere", "ycb", "mesh"]
+Source = Literal["primitive", "ycb", "custom"]
 
 SHAPES: tuple[Shape, ...] = get_args(Shape)
 
@@ -50,6 +62,7 @@ SIZE_LAYOUT: dict[str, tuple[str, ...]] = {
     "cylinder": ("diameter", "height"),
     "sphere": ("diameter",),
     "ycb": ("x", "y", "z"),
+    "mesh": ("x", "y", "z"),
 }
 """Meaning of ``ObjectSpec.size_m`` per shape, all in metres (``ycb``: bounding box)."""
 
@@ -82,6 +95,12 @@ class ObjectSpec:
         data_source: provenance of size, mass and placement; every value not taken from a
             measurement or a published table starts with ``estimate``.
         aliases: other accepted spellings; lookups also ignore case and separators.
+        mesh: path of the object's mesh file (its frame is the object frame), or ``None`` for
+            the built-in geometry (``dexcanvas_core.demos.object_geometry``).
+        mesh_scale: metres per mesh unit.
+        friction: sliding friction coefficient of the surface, or ``None`` for the scene's.
+        inertia_diag: principal moments [kg·m²] about the centre of mass, or ``None``
+            (computed from the shape and the mass, uniform density).
     """
 
     id: str
@@ -96,6 +115,10 @@ class ObjectSpec:
     ycb_id: str | None = None
     data_source: str = ""
     aliases: tuple[str, ...] = ()
+    mesh: str | None = None
+    mesh_scale: float = 1.0
+    friction: float | None = None
+    inertia_diag: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         where = f"object {self.id!r}"
@@ -122,10 +145,10 @@ class ObjectSpec:
             )
         if self.source not in get_args(Source):
             raise ValidationError(f"{where}: unknown source {self.source!r}", field="source")
-        if (self.source == "ycb") != (self.shape == "ycb"):
-            raise ValidationError(
-                f"{where}: source 'ycb' goes with shape 'ycb' and only with it", field="source"
-            )
+        if self.shape == "ycb" and self.source != "ycb":
+            raise ValidationError(f"{where}: shape 'ycb' goes with source 'ycb'", field="source")
+        if self.source == "custom" and self.mesh is None:
+            raise ValidationError(f"{where}: a custom object needs a mesh", field="mesh")
         if self.ycb_id is not None and self.source != "ycb":
             raise ValidationError(f"{where}: only YCB items have a ycb_id", field="ycb_id")
         if self.heavy != (self.base_id is not None):
@@ -141,7 +164,60 @@ class ObjectSpec:
 
     @property
     def is_primitive(self) -> bool:
-        return self.source == "primitive"
+        return self.source == "primitive" and self.mesh is None
+
+    @property
+    def approximate(self) -> bool:
+        """The geometry stands in for the real object: a YCB-style item built from primitives
+        because no model of it was given (``--objects-dir``, a manifest)."""
+        return self.source == "ycb" and self.mesh is None
+
+    @classmethod
+    def from_mesh(
+        cls,
+        path: str | os.PathLike,
+        mass_kg: float,
+        *,
+        id: str | None = None,
+        friction: float | None = None,
+        scale: float = 1.0,
+        inertia_diag: tuple[float, float, float] | None = None,
+        name: str | None = None,
+    ) -> ObjectSpec:
+        """An object given by a mesh file (OBJ, STL, PLY, GLB) and its mass [kg].
+
+        The mesh's frame is the object frame; ``scale`` converts its units to metres.
+        ``id`` defaults to the file name's stem. The mesh is read and checked now (closed
+        surface, 5 mm – 1 m across, plausible density).
+
+        Raises:
+            ValidationError: unreadable or open mesh, absurd scale, mass or inertia.
+        """
+        p = Path(path).expanduser().resolve()
+        oid = (id if id is not None else p.stem).strip()
+        where = f"object {oid!r}"
+        mesh = load_object_mesh(p, scale)
+        mass = check_mass(mass_kg, where, mesh.volume_m3)
+        inertia = None if inertia_diag is None else check_inertia(inertia_diag, where)
+        return cls._from_checked_mesh(oid, name or oid, mesh, mass, friction, scale, inertia, "")
+
+    @classmethod
+    def _from_checked_mesh(cls, oid, name, mesh, mass, friction, scale, inertia, note):
+        ext = tuple(float(v) for v in mesh.extent_m)
+        return cls(
+            id=oid.lower(),
+            name=name,
+            shape="mesh",
+            size_m=ext,
+            mass_kg=mass,
+            placement="on the table, resting as the mesh's frame stands (z up)",
+            source="custom",
+            data_source=f"size: mesh {mesh.source} (bounding box); mass: user-supplied{note}",
+            mesh=mesh.source,
+            mesh_scale=float(scale),
+            friction=None if friction is None else float(friction),
+            inertia_diag=inertia,
+        )
 
     @property
     def bounding_box_m(self) -> tuple[float, float, float]:
@@ -351,13 +427,123 @@ def object_spec(object_id: str | ObjectSpec) -> ObjectSpec:
         raise ValidationError(
             f"an object is given by its id (str), got {type(object_id).__name__} {object_id!r}"
         )
-    found = lookup(_BY_SPELLING, object_id)
+    custom = _custom_index()
+    found = lookup(custom, object_id) or lookup(_BY_SPELLING, object_id)
     if found is None:
-        raise UnknownNameError("object", object_id.strip().lower(), OBJECTS)
+        raise UnknownNameError(
+            "object",
+            object_id.strip().lower(),
+            [*OBJECTS, *(s.id for s in custom.values())],
+            hint=(
+                "; an object outside the catalogue is given with --objects MANIFEST (a TOML "
+                "file: [<id>] mesh = 'path.obj', mass_kg = ...) or ObjectSpec.from_mesh"
+            ),
+        )
     return found
+
+
+# -- objects from meshes: a manifest and an objects directory --------------------------------------
+
+_custom_state: dict = {"key": None, "index": {}}
+
+
+def _custom_index() -> dict[str, ObjectSpec]:
+    """The lookup index of the objects given by ``DEXCANVAS_OBJECTS`` (a manifest) and
+    ``DEXCANVAS_OBJECTS_DIR`` (models of catalogue objects), rebuilt when either changes."""
+    key = (os.environ.get(MANIFEST_ENV) or None, os.environ.get(OBJECTS_DIR_ENV) or None)
+    if key != _custom_state["key"]:
+        specs = _custom_specs(*key)
+        index = build_index(((s, (s.id, *s.aliases)) for s in specs.values()), "object")
+        _custom_state.update(key=key, index=index, specs=specs)
+    return _custom_state["index"]
+
+
+def _custom_specs(manifest: str | None, objects_dir: str | None) -> dict[str, ObjectSpec]:
+    out: dict[str, ObjectSpec] = {}
+    if objects_dir:
+        files = objects_dir_meshes(objects_dir)
+        for spec in OBJECTS.values():
+            f = files.get(spec.id.lower()) or (
+                files.get(spec.base_id.lower()) if spec.base_id else None
+            )
+            if f is None:
+                continue
+            mesh = load_object_mesh(f)
+            check_mass(spec.mass_kg, f"object {spec.id!r} with the model {f}", mesh.volume_m3)
+            out[spec.id] = dataclasses.replace(
+                spec,
+                size_m=tuple(float(v) for v in mesh.extent_m) if spec.shape in ("ycb", "mesh")
+                else spec.size_m,
+                mesh=mesh.source,
+                data_source=f"shape: model {f} (objects directory); {spec.data_source}",
+            )  # fmt: skip
+    if manifest:
+        for e in read_manifest(manifest):
+            base = lookup(_BY_SPELLING, e.id)
+            note = f" (objects manifest {e.manifest})"
+            if base is None:
+                spec = ObjectSpec._from_checked_mesh(
+                    e.id, e.name, e.mesh, e.mass_kg, e.friction, e.scale, e.inertia_diag, note
+                )
+            else:  # a catalogue object given a model: the mesh replaces its built-in shape
+                spec = dataclasses.replace(
+                    base,
+                    mass_kg=e.mass_kg,
+                    mesh=e.mesh.source,
+                    mesh_scale=e.scale,
+                    friction=e.friction,
+                    inertia_diag=e.inertia_diag,
+                    data_source=f"shape and mass: {e.mesh.source}{note}; {base.data_source}",
+                )
+            out[spec.id] = spec
+    return out
+
+
+def custom_objects() -> dict[str, ObjectSpec]:
+    """Objects given by the current manifest and objects directory, by id (see
+    :func:`use_objects`); a catalogue id here overrides the built-in shape."""
+    _custom_index()
+    return dict(_custom_state.get("specs", {}))
+
+
+def use_objects(
+    manifest: str | os.PathLike | None = None, objects_dir: str | os.PathLike | None = None
+) -> dict[str, ObjectSpec]:
+    """Use an objects manifest and/or a directory of object models in every lookup of this
+    process and of the processes it starts (through ``DEXCANVAS_OBJECTS`` /
+    ``DEXCANVAS_OBJECTS_DIR``). ``None`` leaves that source unchanged.
+
+    Everything is read and checked now, so a bad entry stops before any work.
+
+    Returns:
+        the objects given by the manifest and the directory, by id.
+
+    Raises:
+        ValidationError: a bad manifest entry, model file or directory.
+    """
+    previous = {k: os.environ.get(k) for k in (MANIFEST_ENV, OBJECTS_DIR_ENV)}
+    for env, value in ((MANIFEST_ENV, manifest), (OBJECTS_DIR_ENV, objects_dir)):
+        if value is not None:
+            os.environ[env] = str(Path(value).expanduser().resolve())
+    try:
+        return custom_objects()
+    except Exception:
+        for k, v in previous.items():  # leave the process as it was
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+        raise
+
+
+def clear_objects() -> None:
+    """Forget the manifest and objects directory (back to the built-in catalogue)."""
+    os.environ.pop(MANIFEST_ENV, None)
+    os.environ.pop(OBJECTS_DIR_ENV, None)
 
 
 def heavy_variant(object_id: str | ObjectSpec) -> ObjectSpec | None:
     """The weighted ``H`` variant of a light object, or ``None`` if it has none."""
     base = object_spec(object_id)
-    return next((s for s in OBJECTS.values() if s.base_id == base.id), None)
+    heavy = next((s for s in OBJECTS.values() if s.base_id == base.id), None)
+    return None if heavy is None else object_spec(heavy.id)

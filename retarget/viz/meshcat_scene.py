@@ -247,6 +247,17 @@ def set_primitive(vis, kind: str, size, rgba, T_local: np.ndarray) -> bool:
     return True
 
 
+def set_mesh(vis, vertices: np.ndarray, faces: np.ndarray, rgba) -> None:
+    """Draw a triangle mesh (``vertices (V, 3)`` [m], ``faces (F, 3)``) at ``vis``."""
+    _import_meshcat()
+    import meshcat.geometry as mg
+
+    vis.set_object(
+        mg.TriangularMeshGeometry(np.asarray(vertices, np.float32), np.asarray(faces, np.uint32)),
+        _material(rgba),
+    )
+
+
 _GEOM_KIND = {
     _MJ_BOX: "box",
     _MJ_SPHERE: "sphere",
@@ -391,6 +402,9 @@ class MeshcatScene:
                 rgba = style.OBJECT_RGBA
             targets.append((self.root["human"]["object_ref"], rgba))
         for vis, rgba in targets:
+            if geom.visual is not None:  # a mesh object: its surface, not its convex parts
+                set_mesh(vis["mesh"], *geom.visual, rgba)
+                continue
             for i, prim in enumerate(geom.primitives):
                 T = _pose(_aa_to_matrix(prim.rot_aa), prim.pos)
                 set_primitive(vis[f"p{i}"], prim.type, prim.size, rgba, T)

@@ -89,6 +89,17 @@ def build_model(hand, object_id: str, data, framing, options):
     )
     for name, rgba in (("viz_object", style.OBJECT_RGBA), ("viz_object_ref", ref_rgba)):
         body = spec.worldbody.add_body(name=name, mocap=True)
+        if geometry.visual is not None:  # a mesh object: its surface, not its convex parts
+            spec.add_mesh(
+                name=f"{name}_mesh",
+                uservert=np.asarray(geometry.visual[0]).ravel().tolist(),
+                userface=np.asarray(geometry.visual[1]).ravel().tolist(),
+            )
+            body.add_geom(
+                type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"{name}_mesh", rgba=list(rgba),
+                contype=0, conaffinity=0,
+            )  # fmt: skip
+            continue
         for prim in geometry.primitives:
             size = list(prim.size) + [0.0] * (3 - len(prim.size))
             body.add_geom(
