@@ -61,7 +61,7 @@ SDF_MIN_SPACING_M = 0.001
 SDF_PAD_M = 0.03
 """Grid margin around the object [m]; beyond it distances are extrapolated."""
 
-CACHE_VERSION = 1
+CACHE_VERSION = 2
 """Bumped when the cached decomposition or grid changes meaning."""
 
 
@@ -258,9 +258,9 @@ def convex_parts(mesh: ObjectMesh) -> list[ConvexPart]:
 # -- signed distance ------------------------------------------------------------------------------
 
 
-def _point_triangle_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray):
-    """Euclidean distance ``(N,)`` from points ``p (N, 3)`` to triangles ``(a, b, c)`` (each
-    ``(N, 3)``), by the closest point's Voronoi region (Ericson, Real-Time Collision Detection,
+def _closest_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray):
+    """Closest points ``(N, 3)`` on triangles ``(a, b, c)`` (each ``(N, 3)``) to points
+    ``p (N, 3)``, by the closest point's Voronoi region (Ericson, Real-Time Collision Detection,
     5.1.5)."""
     ab, ac, ap = b - a, c - a, p - a
     d1 = np.einsum("ij,ij->i", ab, ap)
@@ -292,8 +292,12 @@ def _point_triangle_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.
     q = np.where(m[:, None], a + ab * t_ab[:, None], q)
     q = np.where(((d6 >= 0) & (d5 <= d6))[:, None], c, q)
     q = np.where(((d3 >= 0) & (d4 <= d3))[:, None], b, q)
-    q = np.where(((d1 <= 0) & (d2 <= 0))[:, None], a, q)
-    return np.linalg.norm(p - q, axis=1)
+    return np.where(((d1 <= 0) & (d2 <= 0))[:, None], a, q)
+
+
+def _point_triangle_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray):
+    """Euclidean distance ``(N,)`` from points ``p (N, 3)`` to triangles ``(a, b, c)``."""
+    return np.linalg.norm(p - _closest_on_triangles(p, a, b, c), axis=1)
 
 
 def _inside_any(points: np.ndarray, parts: list[ConvexPart]) -> np.ndarray:
@@ -327,17 +331,31 @@ def _surface_samples(parts: list[ConvexPart], spacing: float) -> tuple[np.ndarra
 
 @dataclass(frozen=True)
 class SdfGrid:
-    """Signed distance [m] sampled on a regular grid (object frame), negative inside.
+    """Signed distance [m] of a union of convex parts on a regular grid (object frame),
+    negative inside, with each node's nearest surface triangle.
+
+    Queries inside the grid are exact up to which triangles are tried: the distance to the
+    nearest of the eight surrounding nodes' nearest triangles, the sign from the parts
+    (inside one of them), the normal along the closest point's direction. Without the
+    triangles (``triangles is None``), the values are interpolated trilinearly.
 
     Attributes:
         origin: ``(3,)`` position of node ``(0, 0, 0)`` [m].
         spacing: node spacing [m].
         values: ``(nx, ny, nz)`` signed distances at the nodes [m].
+        nearest: ``(nx, ny, nz)`` index of each node's nearest triangle, or ``None``.
+        triangles: ``(M, 3, 3)`` the parts' outward-wound triangles [m], or ``None``.
+        planes: ``(K, 4)`` the parts' face planes stacked (``n·x + d ≤ 0`` inside), or ``None``.
+        part_of_plane: ``(K,)`` which part each plane bounds, or ``None``.
     """
 
     origin: np.ndarray
     spacing: float
     values: np.ndarray
+    nearest: np.ndarray | None = None
+    triangles: np.ndarray | None = None
+    planes: np.ndarray | None = None
+    part_of_plane: np.ndarray | None = None
 
     @classmethod
     def from_parts(cls, parts: list[ConvexPart]) -> SdfGrid:
@@ -354,7 +372,8 @@ class SdfGrid:
         # The nearest sample's distance overestimates the true one by at most about
         # (0.35 h)² / (2 d): below 1 % of h beyond 3 h. Nearer nodes get the exact distance to
         # the triangles of their k nearest samples.
-        dist, _ = tree.query(nodes, k=1)
+        dist, nn1 = tree.query(nodes, k=1)
+        nearest = tri_of[nn1]
         near = np.flatnonzero(dist < 3.0 * h)
         k = min(8, len(samples))
         for s in range(0, len(near), 65536):
@@ -363,20 +382,73 @@ class SdfGrid:
             cand = tri_of[nn.reshape(len(idx), k)]  # (B, k) triangle ids
             rep = np.repeat(nodes[idx], k, axis=0)
             t = tris[cand.ravel()]
-            d = _point_triangle_distance(rep, t[:, 0], t[:, 1], t[:, 2])
-            dist[idx] = d.reshape(len(idx), k).min(axis=1)
+            d = _point_triangle_distance(rep, t[:, 0], t[:, 1], t[:, 2]).reshape(len(idx), k)
+            best = d.argmin(axis=1)
+            dist[idx] = d[np.arange(len(idx)), best]
+            nearest[idx] = cand[np.arange(len(idx)), best]
         sign = np.where(_inside_any(nodes, parts), -1.0, 1.0)
-        return cls(lo, h, (sign * dist).reshape(tuple(n)))
+        planes = np.concatenate([p.planes for p in parts])
+        owner = np.concatenate([np.full(len(p.planes), i) for i, p in enumerate(parts)])
+        return cls(
+            lo,
+            h,
+            (sign * dist).reshape(tuple(n)),
+            nearest.astype(np.int32).reshape(tuple(n)),
+            tris,
+            planes,
+            owner,
+        )
 
     def scaled(self, factor: float) -> SdfGrid:
         """The grid of the shape scaled by ``factor`` about the frame's origin."""
-        return SdfGrid(self.origin * factor, self.spacing * factor, self.values * factor)
+        planes = None
+        if self.planes is not None:
+            planes = self.planes.copy()
+            planes[:, 3] *= factor
+        return SdfGrid(
+            self.origin * factor,
+            self.spacing * factor,
+            self.values * factor,
+            self.nearest,
+            None if self.triangles is None else self.triangles * factor,
+            planes,
+            self.part_of_plane,
+        )
+
+    def _inside(self, p: np.ndarray) -> np.ndarray:
+        """``(N,)`` points inside one of the parts."""
+        s = p @ self.planes[:, :3].T + self.planes[:, 3]  # (N, K), the parts' planes in order
+        starts = np.flatnonzero(np.r_[True, np.diff(self.part_of_plane) != 0])
+        worst = np.maximum.reduceat(s, starts, axis=1)  # per part: the most violated plane
+        return (worst <= 0.0).any(axis=1)
+
+    def _exact(self, p: np.ndarray, i0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Distance and normal from the candidate triangles of the cells ``i0`` (see class)."""
+        corners = np.array([(a, b, c) for a in (0, 1) for b in (0, 1) for c in (0, 1)])
+        idx = i0[:, None, :] + corners[None]  # (N, 8, 3)
+        cand = self.nearest[idx[..., 0], idx[..., 1], idx[..., 2]]  # (N, 8)
+        t = self.triangles[cand.ravel()]
+        rep = np.repeat(p, 8, axis=0)
+        q = _closest_on_triangles(rep, t[:, 0], t[:, 1], t[:, 2])
+        dist = np.linalg.norm(rep - q, axis=1).reshape(len(p), 8)
+        best = dist.argmin(axis=1)
+        rows = np.arange(len(p))
+        d = dist[rows, best]
+        q = q.reshape(len(p), 8, 3)[rows, best]
+        tri = t.reshape(len(p), 8, 3, 3)[rows, best]
+        inside = self._inside(p)
+        g = (p - q) * np.where(inside, -1.0, 1.0)[:, None]
+        on = d < 1e-9  # on the surface: the triangle's own normal
+        if on.any():
+            g[on] = np.cross(tri[on, 1] - tri[on, 0], tri[on, 2] - tri[on, 0])
+        return np.where(inside, -d, d), g
 
     def sdf_and_normal(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Signed distance ``(N,)`` [m] and unit gradient ``(N, 3)`` at points ``(N, 3)``.
 
-        Inside the grid: trilinear interpolation and its exact gradient. Outside: the value at
-        the nearest grid point plus the distance to it, the gradient pointing away from it.
+        Exact (see the class); beyond the grid, from the triangles of the nearest border cell.
+        Without triangles: trilinear interpolation and its gradient inside the grid, beyond it
+        the value at the nearest grid point plus the distance to it.
         """
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         n = np.asarray(self.values.shape)
@@ -384,6 +456,9 @@ class SdfGrid:
         pc = np.clip(p, self.origin, hi)
         x = (pc - self.origin) / self.spacing
         i0 = np.minimum(np.floor(x).astype(int), n - 2)
+        if self.triangles is not None:  # beyond the grid: the border cell's triangles
+            d, g = self._exact(p, i0)
+            return self._finish(p, p, d, g)
         t = x - i0
         V = self.values
         c = np.empty((len(p), 2, 2, 2))
@@ -403,6 +478,11 @@ class SdfGrid:
         g[:, 1] = dy[:, 0] * (1 - tz) + dy[:, 1] * tz
         g[:, 2] = cxy[:, 1] - cxy[:, 0]
         g /= self.spacing
+        return self._finish(p, pc, d, g)
+
+    @staticmethod
+    def _finish(p, pc, d, g) -> tuple[np.ndarray, np.ndarray]:
+        """Extend beyond the grid (``pc``: the points clamped to it) and normalise ``g``."""
         out = p - pc
         off = np.linalg.norm(out, axis=1)
         far = off > 0
@@ -445,7 +525,15 @@ def mesh_collision(mesh: ObjectMesh) -> MeshCollision:
                 parts = tuple(
                     ConvexPart(z[f"v{i}"], z[f"f{i}"], z[f"p{i}"]) for i in range(int(z["n"]))
                 )
-                sdf = SdfGrid(z["origin"], float(z["spacing"]), z["values"])
+                sdf = SdfGrid(
+                    z["origin"],
+                    float(z["spacing"]),
+                    z["values"],
+                    z["nearest"],
+                    z["triangles"],
+                    z["planes"],
+                    z["part_of_plane"],
+                )
             return MeshCollision(parts, sdf, cached=True)
         except (OSError, KeyError, ValueError) as e:
             log.warning("ignoring an unreadable mesh cache entry %s (%s); rebuilding", path, e)
@@ -454,7 +542,15 @@ def mesh_collision(mesh: ObjectMesh) -> MeshCollision:
     arrays: dict[str, np.ndarray] = {"n": np.array(len(parts))}
     for i, part in enumerate(parts):
         arrays[f"v{i}"], arrays[f"f{i}"], arrays[f"p{i}"] = part.vertices, part.faces, part.planes
-    arrays.update(origin=sdf.origin, spacing=np.array(sdf.spacing), values=sdf.values)
+    arrays.update(
+        origin=sdf.origin,
+        spacing=np.array(sdf.spacing),
+        values=sdf.values,
+        nearest=sdf.nearest,
+        triangles=sdf.triangles,
+        planes=sdf.planes,
+        part_of_plane=sdf.part_of_plane,
+    )
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     with open(tmp, "wb") as fh:
