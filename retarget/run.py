@@ -25,6 +25,7 @@ from typing import Literal
 import numpy as np
 
 from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S, moving_average
+from dexcanvas_core.table import table_of
 from retarget.errors import RetargetError
 
 log = logging.getLogger(__name__)
@@ -440,7 +441,9 @@ def force_metrics(robot, sim, human, retargeter) -> dict:
     from dexcanvas_core.rotations import aa_to_matrix
 
     R_o = aa_to_matrix(human.object.rot_aa.astype(np.float64))
-    lifted = retargeter.geometry.lowest_z(R_o, human.object.pos.astype(np.float64)) > 0.01
+    p_o = human.object.pos.astype(np.float64)
+    low = retargeter.geometry.lowest_z(R_o, p_o)
+    lifted = table_of(human).height_above(np.c_[p_o[:, :2], low]) > 0.01
     werr_all = np.linalg.norm(robot_total - human_total, axis=1)[touch]
     werr = np.linalg.norm(robot_total - human_total, axis=1)[touch & lifted]
     hc, rc = H > 0.05, R > 0.05
@@ -546,14 +549,15 @@ def run_retarget(cfg: RunConfig) -> dict:
         human_sim = None
         if cfg.forces and (traj.contacts is None or traj.object_wrench_world is None):
             traj, human_sim = _human_forces(traj, pair, prog)
-        retargeter = Retargeter(hand, geometry, rcfg)
+        table = table_of(traj)
+        retargeter = Retargeter(hand, geometry, rcfg, table=table)
         setup_s = time.perf_counter() - t0
         replay = None
         if cfg.human_replay:
             replay = _human_replay(traj, pair, prog, retargeter.tip_human)
         robot = retargeter.retarget(traj, progress=prog.task("retargeting", traj.num_frames))
         vcfg = ValidateConfig(contact_timeconst=FORCE_CONTACT_TIMECONST if cfg.forces else None)
-        resim = Resimulator(hand, geometry, vcfg)
+        resim = Resimulator(hand, geometry, vcfg, table=table)
         sim = resim.run(robot.q_command, traj, progress=prog.task("re-simulating", traj.num_frames))
         calibrated = planned = None
         if cfg.forces and cfg.calibrate_iterations > 0:
