@@ -109,21 +109,59 @@ def _load_demonstration(cfg: RunConfig, pair):
     from dexcanvas_core.loaders.selection import load_demonstration
     from dexcanvas_core.taxonomy import Pair
 
+    def load(p):
+        if cfg.dataset is None:
+            _ensure_builtin(p, cfg.progress)
+        return load_demonstration(p, cfg.index, cfg.dataset)
+
     try:
-        return load_demonstration(pair, cfg.index, cfg.dataset), None
+        return load(pair), None
     except DatasetError as e:
         base = pair.object.base_id
         if not pair.object.heavy or base is None:
             raise RetargetError(str(e)) from e
         light = Pair.parse(f"{base}/{pair.manipulation_type.name}")
         try:
-            traj = load_demonstration(light, cfg.index, cfg.dataset)
+            traj = load(light)
         except DatasetError:
             raise RetargetError(str(e)) from e
         log.warning(
             "no %s demonstration: using %s's with the %s object", pair, light, pair.object.id
         )
         return traj, str(light)
+
+
+def _ensure_builtin(pair, progress: bool) -> None:
+    """Build the built-in demonstration of ``pair`` if it is not cached yet, saying so on the
+    terminal first (``progress``; else in the log) with where it is cached, then showing the
+    build's progress bar (``builtin.builtin_demonstration_path``).
+
+    Raises:
+        DatasetError: ``pair`` is not in the built-in set, or its demonstration fails the
+            checks.
+    """
+    from dexcanvas_core.builtin import (
+        builtin_demonstration_cached,
+        builtin_demonstration_path,
+        builtin_pair_path,
+    )
+    from dexcanvas_core.demos import builtin_pairs
+
+    if builtin_demonstration_cached(pair) is not None:
+        return
+    if pair not in builtin_pairs():
+        builtin_demonstration_path(pair)  # raises the DatasetError that says so
+    line = (
+        f"building the built-in demonstration {pair} (first use; cached in "
+        f"{builtin_pair_path(pair)})"
+    )
+    if progress:
+        from rich.console import Console
+
+        Console(stderr=True, highlight=False).print(line, markup=False)
+    else:
+        log.info("%s", line)
+    builtin_demonstration_path(pair, progress=progress)
 
 
 FORCE_CONTACT_TIMECONST = 0.02

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 
 import mujoco
 import numpy as np
@@ -146,6 +147,7 @@ def _table_distance(rt, q: np.ndarray) -> float:
 
 def test_retargeting_keeps_clear_of_the_table_only_over_it():
     from dexcanvas_core.demos.geometry import object_geometry
+    from retarget.errors import RetargetError
     from retarget.hands import get_hand
     from retarget.retargeter import Retargeter
 
@@ -167,5 +169,5 @@ def test_retargeting_keeps_clear_of_the_table_only_over_it():
     assert _tip_z(rt, q_over).min() > DEFAULT_TABLE.top_z_m
     assert _table_distance(rt, q_over) > rt.cfg.table_clearance - 1e-3
     # a Retargeter refuses a trajectory on another table than its own
-    with pytest.raises(Exception, match="table=dexcanvas_core.table.table_of"):
+    with pytest.raises(RetargetError, match=re.escape("table=dexcanvas_core.table.table_of")):
         rt.retarget(dataclasses.replace(traj, table=beside))
