@@ -556,11 +556,8 @@ def retarget_config(cfg: RunConfig):
 
 def run_retarget(cfg: RunConfig) -> dict:
     """Retarget, re-simulate and write the outputs; return the metrics dict."""
-    from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.taxonomy import Pair
     from retarget.hands import get_hand
-    from retarget.retargeter import Retargeter
-    from retarget.validate import Resimulator, ValidateConfig
 
     if cfg.force_scale != 1.0 and not cfg.forces:
         raise RetargetError(
@@ -572,11 +569,17 @@ def run_retarget(cfg: RunConfig) -> dict:
             "--human-replay scores the human's forces against a second simulation of them, "
             "for force matching: add --forces (or leave --human-replay out)"
         )
-    rcfg = retarget_config(cfg)
     pair = Pair.parse(cfg.pair)
     hand = get_hand(cfg.hand)
     check_pair(hand, pair.manipulation_type)
+    # The demonstration first: on first use it is built, and the terminal says so at once;
+    # the solver's modules compile their numba kernels on a machine's first import (seconds).
     traj, substituted = _load_demonstration(cfg, pair)
+    from dexcanvas_core.demos.geometry import object_geometry
+    from retarget.retargeter import Retargeter
+    from retarget.validate import Resimulator, ValidateConfig
+
+    rcfg = retarget_config(cfg)
     geometry = object_geometry(pair.object.id)
     out_dir = cfg.output_dir()
     out_dir.mkdir(parents=True, exist_ok=True)
