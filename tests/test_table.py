@@ -171,3 +171,14 @@ def test_retargeting_keeps_clear_of_the_table_only_over_it():
     # a Retargeter refuses a trajectory on another table than its own
     with pytest.raises(RetargetError, match=re.escape("table=dexcanvas_core.table.table_of")):
         rt.retarget(dataclasses.replace(traj, table=beside))
+
+
+def test_plausibility_check_holds_the_hand_above_the_table_only_over_it():
+    from dexcanvas_core.demos.checks import check_trajectory
+
+    traj = _lowered_demo(0.04)  # fingertips 2 cm and more below the top
+    over = check_trajectory(traj).checks["hand_table"]
+    assert not over.passed and over.value > 15.0  # [mm] below the default table's top
+    edge_x = float(traj.hand.joint_pos[..., 0].min()) - 0.05
+    beside = dataclasses.replace(traj, table=Table(center_x_m=edge_x - 0.6))
+    assert check_trajectory(beside).checks["hand_table"].value == 0.0
