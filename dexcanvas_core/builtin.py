@@ -1,11 +1,23 @@
-"""The built-in dataset that ``DexCanvasDataset()`` uses when no path is given.
+"""The built-in demonstrations: the dataset ``DexCanvasDataset()`` uses when no path is given,
+and the single demonstrations ``load_demonstration(pair)`` and the command lines use.
 
-It is generated once, deterministically, and cached in the user cache directory
+They are generated on first use, deterministically, and cached in the user cache directory
 (``$DEXCANVAS_CACHE_DIR`` or the platform's cache dir, e.g. ``~/.cache/dexcanvas-retarget``).
 The content comes from :mod:`dexcanvas_core.demos`: the built-in subset of feasible
 (object, manipulation type) pairs (``demos.builtin_pairs``), one demonstration each, operators
-cycling, seed 0, every demonstration passing the plausibility checks. The build report is
-written next to the dataset (``<dataset>.report.json``). No network is needed.
+cycling, seed 0, every demonstration passing the plausibility checks (``demos.builtin_plan``).
+
+* :func:`default_dataset_path` — the whole set, one Lance dataset
+  (``builtin-demos-v<version>.lance``), built in parallel over the CPU cores;
+* :func:`builtin_demonstration_path` — one pair's demonstration only, the row the whole set
+  holds for it (same operator and seed), built alone in a few seconds and cached per pair
+  (``builtin-demos-v<version>-pairs/<object>.<type>.lance``); the whole set, when already
+  built, serves it instead.
+
+Every build writes into a temporary directory renamed into place (``io.write_dataset``) under a
+per-destination lock, so concurrent first uses build once and readers never see a partial
+dataset. The build report is written next to each dataset (``<dataset>.report.json``). No
+network is needed.
 """
 
 from __future__ import annotations
@@ -13,6 +25,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import sys
 from pathlib import Path
 
 log = logging.getLogger(__name__)
@@ -53,15 +66,89 @@ def _build_lock(path: Path):
             fcntl.flock(fh, fcntl.LOCK_UN)
 
 
-def default_dataset_path() -> Path:
-    """Path of the built-in dataset, building it on first use (under a minute)."""
+def _built(path: Path) -> bool:
+    """Whether a Lance dataset is complete at ``path`` (it is renamed into place whole)."""
+    return (path / "_versions").is_dir()
+
+
+def default_dataset_path(progress: bool | None = None, workers: int | None = None) -> Path:
+    """Path of the whole built-in set, building it on first use.
+
+    Args:
+        progress: show a progress bar on stderr naming what is built and where (default:
+            when stderr is a terminal).
+        workers: processes generating demonstrations (default ``os.cpu_count()``; the content
+            does not depend on it).
+    """
     path = cache_dir() / builtin_dataset_name()
-    if (path / "_versions").is_dir():
+    if _built(path):
         return path
     with _build_lock(path):
-        if not (path / "_versions").is_dir():  # another process may have built it meanwhile
+        if not _built(path):  # another process may have built it meanwhile
             from dexcanvas_core.demos import build_builtin
 
-            log.info("building the built-in dataset at %s", path)
-            build_builtin(path)
+            workers = workers or os.cpu_count() or 1
+            log.info("building the built-in dataset at %s (%d processes)", path, workers)
+            build_builtin(path, progress=_show(progress), workers=workers)
     return path
+
+
+def builtin_pair_path(pair) -> Path:
+    """Where one pair's built-in demonstration is cached (``"cube2/tripod"`` or a ``Pair``)."""
+    from dexcanvas_core.demos import DEMOS_VERSION
+    from dexcanvas_core.taxonomy import Pair
+
+    p = pair if isinstance(pair, Pair) else Pair.parse(pair)
+    folder = cache_dir() / f"builtin-demos-v{DEMOS_VERSION}-pairs"
+    return folder / f"{p.object.id}.{p.manipulation_type.name}.lance"
+
+
+def builtin_demonstration_cached(pair) -> Path | None:
+    """The dataset already holding ``pair``'s built-in demonstration (the whole set, else the
+    pair's own), or None when using it would build it."""
+    whole = cache_dir() / builtin_dataset_name()
+    if _built(whole):
+        return whole
+    own = builtin_pair_path(pair)
+    return own if _built(own) else None
+
+
+def builtin_demonstration_path(pair, progress: bool | None = None) -> Path:
+    """A dataset holding the built-in demonstration of ``pair``: the whole set when it is
+    built, else the pair's own (built now if needed: the row the whole set holds for it).
+
+    Args:
+        pair: ``"cube2/tripod"`` or a ``Pair``.
+        progress: show a progress indication on stderr while building (default: when stderr
+            is a terminal).
+
+    Raises:
+        DatasetError: the pair is not in the built-in set, or its demonstration fails the
+            plausibility checks (the whole set leaves it out too); the message says which and
+            how to proceed.
+    """
+    from dexcanvas_core.demos import DemoError, build_builtin, builtin_plan
+    from dexcanvas_core.errors import DatasetError
+
+    cached = builtin_demonstration_cached(pair)
+    if cached is not None:
+        return cached
+    builtin_plan([pair])  # raises DatasetError for a pair the built-in set does not hold
+    path = builtin_pair_path(pair)
+    with _build_lock(path):
+        if not _built(path):  # another process may have built it meanwhile
+            log.info("building the built-in demonstration of %s at %s", pair, path)
+            try:
+                build_builtin(path, progress=_show(progress), pairs=[pair])
+            except DemoError as e:
+                raise DatasetError(
+                    f"the built-in demonstration of {pair} does not pass the plausibility "
+                    f"checks, so the built-in set leaves it out ({e}); use another pair or "
+                    "give a dataset that has it (--dataset PATH)",
+                    dataset=str(path),
+                ) from e
+    return path
+
+
+def _show(progress: bool | None) -> bool:
+    return sys.stderr.isatty() if progress is None else bool(progress)

@@ -12,6 +12,7 @@ A trajectory holds
 * optionally :class:`Contacts`: per-frame hand-part contacts with forces, stored losslessly in
   the public layout's record form and viewable as dense ``(T, N, 3)`` arrays,
 * optionally the force pipeline's additions (``object_wrench_world``, solver settings),
+* optionally the :class:`~dexcanvas_core.table.Table` it was performed on (else the default),
 * ``extras``: any further fields of the source row, kept as Arrow scalars so that a row read
   from a dataset is written back unchanged.
 """
@@ -29,6 +30,7 @@ import numpy as np
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.keypoints import FINGERS
 from dexcanvas_core.rotations import slerp_aa
+from dexcanvas_core.table import Table
 
 CONTACT_PARTS: tuple[str, ...] = (
     "palm",
@@ -345,6 +347,9 @@ class Trajectory:
     """(T, 6): force [N] and torque [N·m] on the object about its centre of mass, world frame."""
     solver_settings: dict[str, Any] | None = None
     """Physics settings the contact forces were computed with (force pipeline output)."""
+    table: Table | None = None
+    """The table the demonstration was performed on (Lance column ``table``); ``None``: the
+    default table (:data:`dexcanvas_core.table.DEFAULT_TABLE`, see ``table_of``)."""
     extras: dict[str, Any] = field(default_factory=dict)
     """Further source fields (Arrow scalars) kept for a lossless write-back."""
 
@@ -352,6 +357,11 @@ class Trajectory:
         self.timestamp = np.asarray(self.timestamp, dtype=np.float64).reshape(-1)
         self.hands = list(self.hands)
         self.objects = list(self.objects)
+        if self.table is not None and not isinstance(self.table, Table):
+            raise ValidationError(
+                f"trajectory table must be a Table or None, got {type(self.table).__name__}",
+                field="table",
+            )
         if self.object_wrench_world is not None:
             self.object_wrench_world = _f32(
                 self.object_wrench_world, (self.num_frames, 6), "object_wrench_world"

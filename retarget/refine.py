@@ -41,6 +41,7 @@ from dexcanvas_core.sim.tracker import (
     TrackingEnv,
     track,
 )
+from dexcanvas_core.table import DEFAULT_TABLE, Table, table_of
 from dexcanvas_core.trajectory import CONTACT_PARTS
 from retarget.errors import RetargetError
 from retarget.hands.base import WRIST_BODY
@@ -188,12 +189,19 @@ def _part_of(human_finger: str | None) -> str:
     return "thumb_ip" if human_finger == "thumb" else f"{human_finger}_dip"
 
 
-def build_refine_scene(hand, geometry, fps: float, cfg: RefineConfig, tip_sites: list[str]):
-    """The robot hand + free object + table, a weld anchor, fingertip-in-object sensors."""
+def build_refine_scene(
+    hand,
+    geometry,
+    fps: float,
+    cfg: RefineConfig,
+    tip_sites: list[str],
+    table: Table = DEFAULT_TABLE,
+):
+    """The robot hand + free object + ``table``, a weld anchor, fingertip-in-object sensors."""
     spec = hand.build_spec()
     substeps = max(1, int(np.ceil(1.0 / (fps * cfg.max_timestep_s) - 1e-9)))
     spec.option.timestep = 1.0 / (fps * substeps)
-    add_table(spec)
+    add_table(spec, table)
     add_object(spec, geometry, mocap=False)
     anchor = spec.worldbody.add_body(name=OBJECT_ANCHOR, mocap=True)
     anchor.add_site(name="object_anchor_site", size=[0.002, 0, 0])
@@ -254,6 +262,7 @@ def build_refine_scene(hand, geometry, fps: float, cfg: RefineConfig, tip_sites:
         weld_eq=m.equality("object_hold").id,
         fps=fps,
         physics=PhysicsSettings(substeps=substeps, max_timestep_s=cfg.max_timestep_s),
+        table=table,
     )
     return scene, int(m.sensor_adr[first_sensor]) if tip_sites else 0
 
@@ -397,7 +406,7 @@ def _tracking_env(hand, geometry, human, robot, tip_sites, cfg: RefineConfig):
     """The tracker's environment for ``robot`` on ``human``: ``(env, act_q, ctrl_ref)``."""
     if not human.objects:
         raise RetargetError("refinement needs a demonstration with an object")
-    scene, adr = build_refine_scene(hand, geometry, human.fps, cfg, tip_sites)
+    scene, adr = build_refine_scene(hand, geometry, human.fps, cfg, tip_sites, table_of(human))
     m = scene.model
     act_q = np.array([m.jnt_qposadr[m.actuator_trnid[a, 0]] for a in range(m.nu)])
     if (m.actuator_trntype != mujoco.mjtTrn.mjTRN_JOINT).any():

@@ -39,6 +39,7 @@ import numpy as np
 
 from dexcanvas_core.keypoints import MANO21
 from dexcanvas_core.rotations import aa_to_matrix, aa_to_quat_wxyz
+from dexcanvas_core.table import DEFAULT_TABLE, Table
 from dexcanvas_core.trajectory import Trajectory
 from retarget._kernels import predicted_start
 from retarget.errors import RetargetError
@@ -62,7 +63,7 @@ from retarget.objectives import (
     WristPoseObjective,
 )
 from retarget.qp import QPSolveError, build_qp, solve_qp
-from retarget.scene import Scene, build_retarget_scene
+from retarget.scene import Scene, build_retarget_scene, check_table
 from retarget.state import RobotState
 
 log = logging.getLogger(__name__)
@@ -525,16 +526,28 @@ class Retargeter:
         geometry: the object's ``ObjectGeometry`` (``dexcanvas_core.demos.object_geometry``);
             ``None`` retargets the hand alone (keypoint-only use).
         config: weights and switches.
+        table: the table of the trajectories it will retarget (``table_of(trajectory)``;
+            default the default table): the hand keeps ``table_clearance`` above its top, and
+            only there. :meth:`retarget` refuses a trajectory on another table.
     """
 
-    def __init__(self, hand, geometry=None, config: RetargetConfig | None = None):
+    def __init__(
+        self,
+        hand,
+        geometry=None,
+        config: RetargetConfig | None = None,
+        table: Table | None = None,
+    ):
         self.hand = hand
         self.geometry = geometry
         self.cfg = (config or RetargetConfig()).validate()
         # The hand's self-collision variant, whatever use_self_collision says: its contact
         # filters are those of the self-collision pairs, which the metrics always measure (the
         # scene is kinematic: contact settings change nothing else).
-        self.scene: Scene = build_retarget_scene(hand, geometry, self_collision=True)
+        self.scene: Scene = build_retarget_scene(
+            hand, geometry, DEFAULT_TABLE if table is None else table, self_collision=True
+        )
+        self.table = self.scene.table
         m = self.scene.model
         self.nq = self.scene.hand_nq
         if self.cfg.backend == "pinocchio":
@@ -897,6 +910,7 @@ class Retargeter:
     ) -> RobotTrajectory:
         """Retarget every frame of ``traj``; ``progress(done, total)`` is called per frame."""
         traj.validate()
+        check_table(self.table, traj, "Retargeter")
         tg = self.human_targets(traj)
         T = traj.num_frames
         q = self.q_default.copy()
@@ -1067,7 +1081,7 @@ class Retargeter:
         p = traj.object.pos.astype(np.float64)
         load = carried_load(
             self.geometry, p, aa_to_quat_wxyz(traj.object.rot_aa), traj.fps,
-            lead_s=self.cfg.grip_lead_s,
+            lead_s=self.cfg.grip_lead_s, table=self.table or DEFAULT_TABLE,
         )  # fmt: skip
         acc = capture_acceleration(p, traj.fps)
         W = np.zeros((T, 6))

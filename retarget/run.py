@@ -25,6 +25,7 @@ from typing import Literal
 import numpy as np
 
 from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S, moving_average
+from dexcanvas_core.table import table_of
 from retarget.errors import RetargetError
 
 log = logging.getLogger(__name__)
@@ -108,21 +109,59 @@ def _load_demonstration(cfg: RunConfig, pair):
     from dexcanvas_core.loaders.selection import load_demonstration
     from dexcanvas_core.taxonomy import Pair
 
+    def load(p):
+        if cfg.dataset is None:
+            _ensure_builtin(p, cfg.progress)
+        return load_demonstration(p, cfg.index, cfg.dataset)
+
     try:
-        return load_demonstration(pair, cfg.index, cfg.dataset), None
+        return load(pair), None
     except DatasetError as e:
         base = pair.object.base_id
         if not pair.object.heavy or base is None:
             raise RetargetError(str(e)) from e
         light = Pair.parse(f"{base}/{pair.manipulation_type.name}")
         try:
-            traj = load_demonstration(light, cfg.index, cfg.dataset)
+            traj = load(light)
         except DatasetError:
             raise RetargetError(str(e)) from e
         log.warning(
             "no %s demonstration: using %s's with the %s object", pair, light, pair.object.id
         )
         return traj, str(light)
+
+
+def _ensure_builtin(pair, progress: bool) -> None:
+    """Build the built-in demonstration of ``pair`` if it is not cached yet, saying so on the
+    terminal first (``progress``; else in the log) with where it is cached, then showing the
+    build's progress bar (``builtin.builtin_demonstration_path``).
+
+    Raises:
+        DatasetError: ``pair`` is not in the built-in set, or its demonstration fails the
+            checks.
+    """
+    from dexcanvas_core.builtin import (
+        builtin_demonstration_cached,
+        builtin_demonstration_path,
+        builtin_pair_path,
+    )
+    from dexcanvas_core.demos import builtin_pairs
+
+    if builtin_demonstration_cached(pair) is not None:
+        return
+    if pair not in builtin_pairs():
+        builtin_demonstration_path(pair)  # raises the DatasetError that says so
+    line = (
+        f"building the built-in demonstration {pair} (first use; cached in "
+        f"{builtin_pair_path(pair)})"
+    )
+    if progress:
+        from rich.console import Console
+
+        Console(stderr=True, highlight=False).print(line, markup=False)
+    else:
+        log.info("%s", line)
+    builtin_demonstration_path(pair, progress=progress)
 
 
 FORCE_CONTACT_TIMECONST = 0.02
@@ -440,7 +479,9 @@ def force_metrics(robot, sim, human, retargeter) -> dict:
     from dexcanvas_core.rotations import aa_to_matrix
 
     R_o = aa_to_matrix(human.object.rot_aa.astype(np.float64))
-    lifted = retargeter.geometry.lowest_z(R_o, human.object.pos.astype(np.float64)) > 0.01
+    p_o = human.object.pos.astype(np.float64)
+    low = retargeter.geometry.lowest_z(R_o, p_o)
+    lifted = table_of(human).height_above(np.c_[p_o[:, :2], low]) > 0.01
     werr_all = np.linalg.norm(robot_total - human_total, axis=1)[touch]
     werr = np.linalg.norm(robot_total - human_total, axis=1)[touch & lifted]
     hc, rc = H > 0.05, R > 0.05
@@ -515,11 +556,8 @@ def retarget_config(cfg: RunConfig):
 
 def run_retarget(cfg: RunConfig) -> dict:
     """Retarget, re-simulate and write the outputs; return the metrics dict."""
-    from dexcanvas_core.demos.geometry import object_geometry, object_record
     from dexcanvas_core.taxonomy import Pair
     from retarget.hands import get_hand
-    from retarget.retargeter import Retargeter
-    from retarget.validate import Resimulator, ValidateConfig
 
     if cfg.force_scale != 1.0 and not cfg.forces:
         raise RetargetError(
@@ -531,11 +569,17 @@ def run_retarget(cfg: RunConfig) -> dict:
             "--human-replay scores the human's forces against a second simulation of them, "
             "for force matching: add --forces (or leave --human-replay out)"
         )
-    rcfg = retarget_config(cfg)
     pair = Pair.parse(cfg.pair)
     hand = get_hand(cfg.hand)
     check_pair(hand, pair.manipulation_type)
+    # The demonstration first: on first use it is built, and the terminal says so at once;
+    # the solver's modules compile their numba kernels on a machine's first import (seconds).
     traj, substituted = _load_demonstration(cfg, pair)
+    from dexcanvas_core.demos.geometry import object_geometry, object_record
+    from retarget.retargeter import Retargeter
+    from retarget.validate import Resimulator, ValidateConfig
+
+    rcfg = retarget_config(cfg)
     geometry = object_geometry(pair.object.id)
     out_dir = cfg.output_dir()
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -546,14 +590,15 @@ def run_retarget(cfg: RunConfig) -> dict:
         human_sim = None
         if cfg.forces and (traj.contacts is None or traj.object_wrench_world is None):
             traj, human_sim = _human_forces(traj, pair, prog)
-        retargeter = Retargeter(hand, geometry, rcfg)
+        table = table_of(traj)
+        retargeter = Retargeter(hand, geometry, rcfg, table=table)
         setup_s = time.perf_counter() - t0
         replay = None
         if cfg.human_replay:
             replay = _human_replay(traj, pair, prog, retargeter.tip_human)
         robot = retargeter.retarget(traj, progress=prog.task("retargeting", traj.num_frames))
         vcfg = ValidateConfig(contact_timeconst=FORCE_CONTACT_TIMECONST if cfg.forces else None)
-        resim = Resimulator(hand, geometry, vcfg)
+        resim = Resimulator(hand, geometry, vcfg, table=table)
         sim = resim.run(robot.q_command, traj, progress=prog.task("re-simulating", traj.num_frames))
         calibrated = planned = None
         if cfg.forces and cfg.calibrate_iterations > 0:

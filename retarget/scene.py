@@ -3,7 +3,8 @@
 The object is built from its primitive composition (``dexcanvas_core.demos.object_geometry``):
 one geom per primitive, the catalogue mass spread over the primitives by volume. In the
 retargeting scene the object is a mocap body (kinematic, posed from the human data); in the
-re-simulation scene it is a free body on a table.
+re-simulation scene it is a free body on a table (a box of finite extent,
+:class:`dexcanvas_core.table.Table`).
 """
 
 from __future__ import annotations
@@ -15,10 +16,33 @@ import numpy as np
 
 from dexcanvas_core.rotations import aa_to_quat_wxyz
 from dexcanvas_core.sim.scene import OBJECT_BODY, TABLE_GEOM, add_object, add_table
+from dexcanvas_core.table import DEFAULT_TABLE, Table, table_of
 from retarget.errors import RetargetError
 
 # The object and the table are built exactly as in the force pipeline's scenes.
-__all__ = ["OBJECT_BODY", "TABLE_GEOM", "Scene", "add_object", "add_table", "build_retarget_scene"]
+__all__ = [
+    "OBJECT_BODY",
+    "TABLE_GEOM",
+    "Scene",
+    "add_object",
+    "add_table",
+    "build_retarget_scene",
+    "check_table",
+]
+
+
+def check_table(table: Table | None, traj, what: str) -> None:
+    """Raise when trajectory ``traj`` names another table than ``table``, the one the scene
+    of ``what`` (e.g. ``"Retargeter"``) was built with (``None``: a scene without a table
+    takes any trajectory)."""
+    if table is None:
+        return
+    want = table_of(traj)
+    if want != table:
+        raise RetargetError(
+            f"trajectory {traj.uuid} was performed on {want}, but this {what} was built for "
+            f"{table}; build it with table=dexcanvas_core.table.table_of(trajectory)"
+        )
 
 
 @dataclass
@@ -32,6 +56,8 @@ class Scene:
     object_geoms: list[int]
     object_body: int
     table_geoms: list[int]
+    table: Table | None = None
+    """The table the scene was built with (``None``: none)."""
 
     def set_object_pose(
         self, p_world: np.ndarray, rot_aa: np.ndarray | None = None, quat_wxyz=None
@@ -51,9 +77,10 @@ class Scene:
 
 
 def build_retarget_scene(
-    hand, geometry=None, table: bool = True, self_collision: bool = False
+    hand, geometry=None, table: Table | None = DEFAULT_TABLE, self_collision: bool = False
 ) -> Scene:
-    """Hand (floating wrist) + the object as a mocap body (+ the table), for the kinematic QP.
+    """Hand (floating wrist) + the object as a mocap body (+ ``table``; ``None``: no table),
+    for the kinematic QP. Without an object there is no table either.
 
     ``self_collision``: build the hand's self-collision variant (``HandModel.build_spec``), so
     that the model's contact filters (``contype``/``conaffinity``, excluded body pairs) describe
@@ -62,10 +89,12 @@ def build_retarget_scene(
     spec = hand.build_spec(self_collision=self_collision)
     if geometry is not None:
         add_object(spec, geometry, mocap=True)
-        if table:
-            add_table(spec)
+        if table is not None:
+            add_table(spec, table)
     model = spec.compile()
-    return _scene(model, geometry is not None)
+    scene = _scene(model, geometry is not None)
+    scene.table = table if scene.table_geoms else None
+    return scene
 
 
 def _scene(model: mujoco.MjModel, with_object: bool) -> Scene:

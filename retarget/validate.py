@@ -23,10 +23,11 @@ import numpy as np
 
 from dexcanvas_core.rotations import aa_to_quat_wxyz, quat_wxyz_to_aa, rotation_angle_between_aa
 from dexcanvas_core.sim.forces import object_contacts
+from dexcanvas_core.table import DEFAULT_TABLE, Table
 from dexcanvas_core.trajectory import Trajectory
 from retarget.errors import RetargetError
 from retarget.hands.base import WRIST_JOINTS
-from retarget.scene import OBJECT_BODY, add_object, add_table
+from retarget.scene import OBJECT_BODY, add_object, add_table, check_table
 
 log = logging.getLogger(__name__)
 
@@ -57,7 +58,7 @@ class ValidateConfig:
     settle_s: float = 0.3
     """Time [s] the scene settles at the first frame (object resting, hand holding) first."""
     table: bool = True
-    """Put a table (z = 0 plane) under the object."""
+    """Put the table under the object (the one given to :class:`Resimulator`)."""
     contact_timeconst: float | None = None
     """Override every contact's ``solref`` time constant [s] (force matching: the force
     pipeline's, ``retarget.run.FORCE_CONTACT_TIMECONST``)."""
@@ -140,12 +141,12 @@ class ValidationResult:
 
 
 def build_sim_scene(
-    hand, geometry, *, table: bool = True, contact_timeconst: float | None = None
+    hand, geometry, *, table: Table | None = DEFAULT_TABLE, contact_timeconst: float | None = None
 ) -> mujoco.MjModel:
-    """Hand with its actuators + the object as a free body (+ a table plane at z = 0)."""
+    """Hand with its actuators + the object as a free body (+ ``table``; ``None``: none)."""
     spec = hand.build_spec()
-    if table:
-        add_table(spec)
+    if table is not None:
+        add_table(spec, table)
     add_object(spec, geometry, mocap=False)
     if contact_timeconst is not None:
         spec.option.enableflags |= mujoco.mjtEnableBit.mjENBL_OVERRIDE
@@ -155,14 +156,24 @@ def build_sim_scene(
 
 
 class Resimulator:
-    """Re-simulate retargeted trajectories of one hand with one object."""
+    """Re-simulate retargeted trajectories of one hand with one object on one table.
 
-    def __init__(self, hand, geometry, config: ValidateConfig | None = None):
+    ``table``: the table of the trajectories it will run (``dexcanvas_core.table.table_of``;
+    default the default table); :meth:`run` refuses a trajectory on another table.
+    """
+
+    def __init__(
+        self, hand, geometry, config: ValidateConfig | None = None, table: Table | None = None
+    ):
         self.hand = hand
         self.geometry = geometry
         self.cfg = config or ValidateConfig()
+        self.table = DEFAULT_TABLE if table is None else table
         self.model = build_sim_scene(
-            hand, geometry, table=self.cfg.table, contact_timeconst=self.cfg.contact_timeconst
+            hand,
+            geometry,
+            table=self.table if self.cfg.table else None,
+            contact_timeconst=self.cfg.contact_timeconst,
         )
         m = self.model
         self.object_body = m.body(OBJECT_BODY).id
@@ -202,6 +213,8 @@ class Resimulator:
             )
         if not np.all(np.isfinite(q)):
             raise RetargetError("joint trajectory contains NaN or inf")
+        if self.cfg.table:
+            check_table(self.table, human, "Resimulator")
         d = mujoco.MjData(m)
         p_obj = human.object.pos.astype(np.float64)
         r_obj = human.object.rot_aa.astype(np.float64)

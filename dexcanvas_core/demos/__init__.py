@@ -25,6 +25,7 @@ from dexcanvas_core.demos.build import (
     build_builtin,
     build_demos,
     builtin_pairs,
+    builtin_plan,
     report_path,
     run_build,
 )
@@ -72,6 +73,7 @@ __all__ = [
     "build_builtin",
     "build_demos",
     "builtin_pairs",
+    "builtin_plan",
     "check_trajectory",
     "feasibility",
     "feasibility_table",

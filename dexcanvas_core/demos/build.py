@@ -135,7 +135,9 @@ class BuildReport:
         """Write the report as JSON (default: ``<out>.report.json`` next to the dataset)."""
         dest = Path(path) if path is not None else report_path(self.out)
         dest.parent.mkdir(parents=True, exist_ok=True)
-        dest.write_text(json.dumps(self.to_dict(), indent=2, default=_json_default))
+        tmp = dest.with_name(f".{dest.name}.tmp-{os.getpid()}")
+        tmp.write_text(json.dumps(self.to_dict(), indent=2, default=_json_default))
+        os.replace(tmp, dest)  # atomic: readers see the old report or the new one
         return dest
 
     def lines(self) -> list[str]:
@@ -226,10 +228,37 @@ def builtin_pairs(per_type: int = BUILTIN_PER_TYPE) -> list[Pair]:
 
 
 def _plan(pairs: Sequence[Pair], reps: int, seed: int) -> list[tuple[Pair, str, int]]:
+    """``(pair, operator, seed)`` per demonstration: operators cycle over the pairs (in
+    order) and reps, seeds count up from ``seed`` per rep."""
     ops = list(OPERATORS)
     return [
         (p, ops[(i + r) % len(ops)], seed + r) for i, p in enumerate(pairs) for r in range(reps)
     ]
+
+
+def builtin_plan(pairs: Sequence[str | Pair] | None = None) -> list[tuple[Pair, str, int]]:
+    """The built-in set's ``(pair, operator, seed)`` items (``builtin_pairs``, seed 0, one
+    demonstration each, operators cycling over the whole set), or those of ``pairs`` only —
+    with the operator and seed the whole set gives them, so a pair built alone is the row the
+    whole set holds for it.
+
+    Raises:
+        DatasetError: a pair that is not in the built-in set (the message lists those that are).
+    """
+    plan = _plan(builtin_pairs(), 1, 0)
+    if pairs is None:
+        return plan
+    wanted = [p if isinstance(p, Pair) else Pair.parse(p) for p in pairs]
+    known = {item[0] for item in plan}
+    missing = [str(p) for p in wanted if p not in known]
+    if missing:
+        raise DatasetError(
+            f"no built-in demonstration of {', '.join(missing)}; the built-in set holds "
+            f"{', '.join(sorted(str(p) for p in known))}. Give a dataset that has it (--dataset "
+            "PATH) or build one (dexcanvas demos build --pairs ...)",
+            dataset="built-in",
+        )
+    return [item for item in plan if item[0] in wanted]
 
 
 CHECK_RETRIES = 2
@@ -324,16 +353,41 @@ def build_demos(
             + "; ".join(f"{k}: {v}" for k, v in report.skipped.items())
             + ")"
         )
+    write_plan(out, plan, report, overwrite=overwrite, progress=progress, workers=workers)
+    report.seconds = time.perf_counter() - t0
+    return report
 
-    def generate(advance) -> Iterator:
-        for (p, op, s), (demo, error) in zip(plan, _run_plan(plan, workers), strict=True):
+
+def write_plan(
+    out: Path,
+    plan: Sequence[tuple[Pair, str, int]],
+    report: BuildReport,
+    *,
+    overwrite: bool = False,
+    progress: bool = False,
+    workers: int = 1,
+) -> None:
+    """Generate the planned ``(pair, operator, seed)`` demonstrations (``workers``
+    processes, spawned) and write those that pass the checks to the Lance dataset ``out``
+    (atomically: ``io.write_dataset``), in plan order whatever ``workers`` is; fills
+    ``report``. ``progress``: a rich progress bar on stderr naming the demonstration being
+    built and the destination.
+
+    Raises:
+        DemoError: no demonstration passed the checks (nothing written).
+    """
+    from dexcanvas_core.io import write_dataset
+
+    def generate(on_done) -> Iterator:
+        for k, ((p, op, s), (demo, error)) in enumerate(
+            zip(plan, _run_plan(list(plan), workers), strict=True)
+        ):
+            on_done(k)
             if demo is None:
                 report.failed[str(p)] = error
                 log.warning("%s (%s, seed %d) failed: %s", p, op, s, error)
-                advance()
                 continue
             report.demos.append(_record(demo))
-            advance()
             if demo.passed:
                 report.written += 1
                 yield demo.trajectory
@@ -345,18 +399,25 @@ def build_demos(
                     p, op, s, CHECK_RETRIES, why,
                 )  # fmt: skip
 
-    from dexcanvas_core.io import write_dataset
-
     mode = "overwrite" if overwrite else "create"
     try:
         if progress:
-            from rich.progress import Progress
+            with _progress_bar() as bar:
+                n = len(plan)
 
-            with Progress(transient=False) as bar:
-                task = bar.add_task("building demonstrations", total=len(plan))
-                write_dataset(generate(lambda: bar.advance(task)), out, mode=mode)
+                def describe(k: int) -> str:
+                    what = f"{plan[k][0]} ({plan[k][1]})" if k < n else "writing"
+                    return f"building {what} → {out}"
+
+                task = bar.add_task(describe(0), total=n)
+
+                def done(k: int) -> None:
+                    bar.update(task, completed=k + 1, description=describe(k + 1))
+
+                write_dataset(generate(done), out, mode=mode)
+                bar.update(task, description=f"built {n} demonstration(s) → {out}")
         else:
-            write_dataset(generate(lambda: None), out, mode=mode)
+            write_dataset(generate(lambda k: None), out, mode=mode)
     except DatasetError as e:
         if report.written == 0 and (report.demos or report.failed):
             raise DemoError(
@@ -365,8 +426,29 @@ def build_demos(
                 + ")"
             ) from e
         raise
-    report.seconds = time.perf_counter() - t0
-    return report
+
+
+def _progress_bar():
+    """A rich progress bar on stderr: spinner, description, bar, count, elapsed time."""
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        SpinnerColumn,
+        TextColumn,
+        TimeElapsedColumn,
+    )
+
+    return Progress(
+        SpinnerColumn(),
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=Console(stderr=True),
+        transient=False,
+    )
 
 
 def run_build(cfg: BuildConfig, progress: bool = True) -> BuildReport:
@@ -385,12 +467,27 @@ def run_build(cfg: BuildConfig, progress: bool = True) -> BuildReport:
     return report
 
 
-def build_builtin(out: str | os.PathLike, progress: bool = False, workers: int = 1) -> BuildReport:
-    """Build the built-in set (``builtin_pairs``, seed 0, one demonstration each) at ``out``,
-    replacing what is there, and write its report next to it (``workers`` processes; the
-    content does not depend on it)."""
-    report = build_demos(out, pairs=builtin_pairs(), reps=1, seed=0, overwrite=True,
-                         progress=progress, workers=workers)  # fmt: skip
+def build_builtin(
+    out: str | os.PathLike,
+    progress: bool = False,
+    workers: int = 1,
+    pairs: Sequence[str | Pair] | None = None,
+) -> BuildReport:
+    """Build the built-in set (``builtin_plan``: ``builtin_pairs``, seed 0, one demonstration
+    each) at ``out``, replacing what is there, and write its report next to it (``workers``
+    processes; the content does not depend on it). ``pairs``: only these built-in pairs, each
+    the row the whole set holds for it (same operator and seed).
+
+    Raises:
+        DatasetError: a pair of ``pairs`` that is not in the built-in set.
+        DemoError: no demonstration passed the checks.
+    """
+    t0 = time.perf_counter()
+    out = Path(out).expanduser()
+    plan = builtin_plan(pairs)
+    report = BuildReport(out=out)
+    write_plan(out, plan, report, overwrite=True, progress=progress, workers=workers)
+    report.seconds = time.perf_counter() - t0
     report.write_json()
     if report.failed:
         log.warning(

@@ -9,7 +9,8 @@ after generation (or one from elsewhere, given a schedule) is judged on its own 
   from that part's pad (its capsule surface in the pad zone) to the object surface is within
   ±1.5 mm;
 * **penetration** — no hand capsule deeper than 2 mm in the object, at any frame;
-* **hand–table** — no hand capsule more than 2 mm below the table surface;
+* **hand–table** — no hand capsule more than 2 mm below the table top where it is over the
+  table (the trajectory's, else the default; beyond its edges nothing is there);
 * **support** — the object never moves (or hangs in the air) unless held by opposing contacts
   or resting on the table (lowest point within 1.5 mm of it) and touched by the hand; it never
   sinks into the table. *Opposing contacts*: the hand parts within 2 mm of the surface push
@@ -38,6 +39,7 @@ from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.mano.limits import anatomical_angles, limit_violation
 from dexcanvas_core.mano.skeleton import HandSkeleton, measure_bone_lengths
 from dexcanvas_core.rotations import aa_to_matrix
+from dexcanvas_core.table import Table, table_of
 from dexcanvas_core.trajectory import Trajectory
 
 
@@ -242,8 +244,9 @@ def check_trajectory(
         f"deepest {pen:.2f} mm ({cap} at frame {f_pen})",
     )  # fmt: skip
 
-    # hand below the table
-    low = (S[..., 2] - hm.s_r).min(axis=1)
+    # hand below the table top, where it is over the table (beyond its edges nothing is there)
+    table = table_of(traj)
+    low = (table.height_above(S) - hm.s_r).min(axis=1)  # (T,) inf: the hand beyond the edges
     below = float(max(0.0, -low.min() * 1e3))
     f_low = int(np.argmin(low))
     report.checks["hand_table"] = CheckResult(
@@ -252,7 +255,7 @@ def check_trajectory(
     )  # fmt: skip
 
     # support
-    bad = _unsupported_frames(geom, hm, d, n_world, R_o, p_o, limits)
+    bad = _unsupported_frames(geom, hm, d, n_world, R_o, p_o, limits, table)
     report.checks["support"] = CheckResult(
         "support", len(bad) == 0, len(bad), 0, "frames",
         "object always held or resting on the table" if not bad else
@@ -396,8 +399,9 @@ def lift_grip_ratio(
     return float(res.fun) if res.status == 0 else math.inf
 
 
-def _unsupported_frames(geom, hm, d, n_world, R_o, p_o, limits: CheckLimits):
-    """Frames ``(t, why)`` where the object moves or floats without support."""
+def _unsupported_frames(geom, hm, d, n_world, R_o, p_o, limits: CheckLimits, table: Table):
+    """Frames ``(t, why)`` where the object moves or floats without support (the table holds
+    it only where its origin is over the table)."""
     T = d.shape[0]
     parts = sorted({c.part for c in CAPSULES})
     part_idx = [np.flatnonzero([CAPSULES[k].part == p for k in hm.s_cap]) for p in parts]
@@ -407,7 +411,8 @@ def _unsupported_frames(geom, hm, d, n_world, R_o, p_o, limits: CheckLimits):
     normals = np.stack([n_world[np.arange(T), a] for a in arg], axis=1)  # (T, P, 3)
     touch = dmin <= limits.touch_mm * 1e-3
     touched = touch.any(axis=1)
-    low = geom.lowest_z(R_o, p_o) * 1e3  # (T,) mm
+    lowest = geom.lowest_z(R_o, p_o)
+    low = table.height_above(np.concatenate([p_o[:, :2], lowest[:, None]], axis=1)) * 1e3  # mm
     resting = np.abs(low) <= limits.table_rest_mm
     step = np.zeros(T)
     turn = np.zeros(T)
@@ -430,5 +435,10 @@ def _unsupported_frames(geom, hm, d, n_world, R_o, p_o, limits: CheckLimits):
             why = "resting but untouched" if resting[t] else "not held by opposing contacts"
             bad.append((t, f"moves {step[t] * 1e3:.1f} mm, {why}"))
         elif not moving[t] and not resting[t] and not held[t]:
-            bad.append((t, f"floats {low[t]:.1f} mm above the table, not held"))
+            where = (
+                f"floats {low[t]:.1f} mm above the table"
+                if np.isfinite(low[t])
+                else "is beyond the table's edge"
+            )
+            bad.append((t, f"{where}, not held"))
     return bad

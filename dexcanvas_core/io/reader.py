@@ -26,6 +26,7 @@ from dexcanvas_core.io.schema import (
     SCHEMA_VERSION_KEY,
     SUPPORTED_MAJOR,
 )
+from dexcanvas_core.table import Table
 from dexcanvas_core.trajectory import (
     CONTACT_PAIR_FIELDS,
     CONTACT_TOTAL_FIELDS,
@@ -50,7 +51,7 @@ _HAND_KNOWN = {
     "hand_name", "mano_global_pos", "mano_global_rot_aa", "mano_hand_pose", "mano_joint_pos",
     "urdf_dof", "urdf_dof_target",
 }  # fmt: skip
-_TOP_KNOWN = {*REQUIRED_COLUMNS, "contact", "object_wrench_world", "contact_solver"}
+_TOP_KNOWN = {*REQUIRED_COLUMNS, "contact", "object_wrench_world", "contact_solver", "table"}
 
 
 def _lance():
@@ -532,6 +533,12 @@ def row_to_trajectory(
     solver = None
     if "contact_solver" in names and col("contact_solver")[i].is_valid:
         solver = json.loads(col("contact_solver")[i].as_py())
+    table = None
+    if "table" in names and col("table")[i].is_valid:
+        try:
+            table = Table.from_dict(col("table")[i].as_py())
+        except ValidationError as e:
+            raise DatasetError(str(e), dataset=dataset, row=row, field="table") from e
 
     extras.update(_scalar_dict(index, 0, _INDEX_KNOWN, "index"))
     extras.update(_scalar_dict(meta, 0, _META_KNOWN, "trajectory_metadata"))
@@ -557,6 +564,7 @@ def row_to_trajectory(
             contacts=contacts,
             object_wrench_world=wrench,
             solver_settings=solver,
+            table=table,
             extras=extras,
         )
         if validate:

@@ -3,13 +3,17 @@
 The layout mirrors the public DexCanvas release (see DESIGN.md): one trajectory per row, nested
 ``index`` and ``trajectory_metadata`` structs, per-frame ``hands[]`` and ``objects[]`` lists and
 the per-frame ``contact`` records. The toolkit's additions are extra top-level columns
-(``object_wrench_world``, ``contact_solver``) and an extra per-point field
+(``object_wrench_world``, ``contact_solver``, ``table``) and an extra per-point field
 (``contact_pairs[].force_world``); readers of the public layout ignore them.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import pyarrow as pa
+
+from dexcanvas_core.table import Table
 
 SCHEMA_VERSION_KEY = b"dexcanvas_retarget_schema"
 """Schema-metadata key naming the contract version of datasets this toolkit writes."""
@@ -98,6 +102,11 @@ def hand_type(urdf_dof: int) -> pa.DataType:
 
 OBJECT = pa.struct([("rot_aa", pa.list_(F3)), ("pos", pa.list_(F3))])
 
+TABLE = pa.struct([pa.field(f.name, pa.float64()) for f in dataclasses.fields(Table)])
+"""The ``table`` column (this toolkit's addition): the :class:`~dexcanvas_core.table.Table` a
+trajectory was performed on, one float64 child per field (lengths [m], yaw [rad]); null or
+absent: the default table."""
+
 REQUIRED_COLUMNS = ("index", "trajectory_metadata", "timestamp", "hands", "objects")
 
 
@@ -107,8 +116,10 @@ def default_schema(
     contact: bool = True,
     contact_force_world: bool = False,
     wrench: bool = False,
+    table: bool = False,
 ) -> pa.Schema:
-    """The schema this toolkit writes when no source schema is given."""
+    """The schema this toolkit writes when no source schema is given (``table``: with the
+    ``table`` column, :data:`TABLE`)."""
     fields = [
         pa.field("index", INDEX),
         pa.field("trajectory_metadata", TRAJECTORY_METADATA),
@@ -121,4 +132,6 @@ def default_schema(
     if wrench:
         fields.append(pa.field("object_wrench_world", pa.list_(f32xn(6))))
         fields.append(pa.field("contact_solver", pa.string()))
+    if table:
+        fields.append(pa.field("table", TABLE))
     return pa.schema(fields, metadata={SCHEMA_VERSION_KEY: SCHEMA_VERSION.encode()})

@@ -46,6 +46,7 @@ def schema_for(traj: Trajectory) -> pa.Schema:
         contact=c is not None,
         contact_force_world=c is not None and c.force_world is not None,
         wrench=traj.object_wrench_world is not None,
+        table=traj.table is not None,
     )
     return _add_extras(schema, traj.extras)
 
@@ -315,8 +316,22 @@ def _contact_array(trajs: list[Trajectory], typ: pa.ListType) -> pa.Array:
     return _list_of(per_row, typ)
 
 
+def _table_array(trajs: list[Trajectory], typ: pa.StructType) -> pa.Array:
+    """The ``table`` column: one struct per trajectory, null where it names no table."""
+    rows = [None if t.table is None else t.table.to_dict() for t in trajs]
+    return pa.array(rows, type=typ)
+
+
 def trajectories_to_batch(trajs: list[Trajectory], schema: pa.Schema) -> pa.RecordBatch:
     """Arrow record batch of ``trajs`` in ``schema`` (DexCanvas layout plus extras)."""
+    if "table" not in schema.names:
+        for t in trajs:
+            if t.table is not None:
+                raise DatasetError(
+                    f"trajectory {t.uuid} names its table but the target schema has no "
+                    "'table' column (it would be lost); write with a schema that has one, e.g. "
+                    "io.default_schema(table=True), or put the trajectory with a table first"
+                )
     cols = []
     for f in schema:
         if f.name == "index":
@@ -346,6 +361,8 @@ def trajectories_to_batch(trajs: list[Trajectory], schema: pa.Schema) -> pa.Reco
                     type=f.type,
                 )
             )  # fmt: skip
+        elif f.name == "table":
+            cols.append(_table_array(trajs, f.type))
         else:
             cols.append(pa.concat_arrays([_extra(t, f.name, f.type) for t in trajs]))
     return pa.RecordBatch.from_arrays(cols, schema=schema)

@@ -239,15 +239,17 @@ def select_rows(
 
 def load_demonstration(pair, index: int = 0, dataset=None):
     """The ``index``-th demonstration (0-based) of ``pair`` (``"cube2/tripod"`` or a ``Pair``)
-    in ``dataset`` (a DexCanvas-layout Lance path; ``None``: the built-in demonstrations)."""
+    in ``dataset`` (a DexCanvas-layout Lance path; ``None``: the built-in demonstration of
+    ``pair``, built alone on first use when the whole built-in set is not built,
+    ``builtin.builtin_demonstration_path``)."""
     from dexcanvas_core.io import open_dataset
     from dexcanvas_core.taxonomy import Pair
 
     pair = pair if isinstance(pair, Pair) else Pair.parse(pair)
     if dataset is None:
-        from dexcanvas_core.builtin import default_dataset_path
+        from dexcanvas_core.builtin import builtin_demonstration_path
 
-        dataset = default_dataset_path()
+        dataset = builtin_demonstration_path(pair)
     ds = open_dataset(dataset)
     sel = select_rows(
         ds, objects=[pair.object.id], manipulation_types=[pair.manipulation_type.name]

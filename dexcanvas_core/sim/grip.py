@@ -40,6 +40,7 @@ import numpy as np
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.keypoints import FINGERS
 from dexcanvas_core.sim.hand import FINGER_HINGES, HAND_JOINTS
+from dexcanvas_core.table import DEFAULT_TABLE, Table
 
 GRAVITY = 9.81
 
@@ -184,11 +185,13 @@ def carried_load(
     *,
     clear_m: tuple[float, float] = (0.001, 0.004),
     lead_s: float = 0.2,
+    table: Table = DEFAULT_TABLE,
 ) -> np.ndarray:
     """``(T,)`` share ``λ`` ∈ [0, 1] of the object's weight the hand carries in the reference.
 
     ``λ`` ramps from 0 to 1 as the reference object's lowest point rises from ``clear_m[0]`` to
-    ``clear_m[1]`` above the table (z = 0), is then brought forward by ``lead_s`` (the largest
+    ``clear_m[1]`` above the table top (1 where the object's origin is beyond the table's
+    edges: nothing else holds it there), is then brought forward by ``lead_s`` (the largest
     value over the next ``lead_s`` seconds) and ramped in over ``lead_s / 2`` (moving average),
     so that the grip is built up before lift-off and released after set-down.
 
@@ -196,6 +199,7 @@ def carried_load(
         geometry: the object's ``ObjectGeometry`` (``lowest_z``).
         object_pos, object_quat: ``(T, 3)`` [m], ``(T, 4)`` (w, x, y, z) reference object pose.
         fps: frame rate [Hz]; clear_m: clearance ramp [m]; lead_s: anticipation [s].
+        table: the table (default :data:`~dexcanvas_core.table.DEFAULT_TABLE`).
     """
     from scipy.spatial.transform import Rotation
 
@@ -208,7 +212,8 @@ def carried_load(
             field="clear_m",
         )
     R = Rotation.from_quat(q, scalar_first=True).as_matrix()
-    h = np.asarray(geometry.lowest_z(R, p), dtype=np.float64)
+    low = np.asarray(geometry.lowest_z(R, p), dtype=np.float64)
+    h = table.height_above(np.concatenate([p[..., :2], low[..., None]], axis=-1))
     lam = np.clip((h - lo) / (hi - lo), 0.0, 1.0)
     n = round(lead_s * fps)
     T = lam.shape[0]

@@ -54,6 +54,7 @@ from dexcanvas_core.sim.tracker import (
     TrackingEnv,
     track,
 )
+from dexcanvas_core.table import table_of
 from dexcanvas_core.trajectory import FORCE_GROUPS, Trajectory
 
 GRAVITY = 9.81
@@ -168,6 +169,7 @@ def prepare(traj: Trajectory, cfg: SimConfig) -> tuple[ObjectGeometry, Reference
         R_base=ref.R_base,
         mass_kg=base.mass_kg * cfg.mass_scale,
         friction_scale=cfg.friction_scale,
+        table=table_of(traj),
     )
     return geometry, ref, scene
 
@@ -234,13 +236,8 @@ def _result(traj, cfg, geometry, ref, scene, env, log, cpu_s) -> SimResult:
     ne_sim = np.linalg.norm(F_ext - m * a_sim, axis=1) / mg
     ne_cap = np.linalg.norm(_moving_average(F_ext, fps) - m * a_cap, axis=1) / mg
     finger = finger_force_series(log.contacts, scene)
-    lowest = np.array(
-        [
-            float(geometry.lowest_z(Rotation.from_quat(q, scalar_first=True).as_matrix(), p))
-            for p, q in zip(log.object_pos, log.object_quat, strict=True)
-        ]
-    )
-    off_table = (lowest > 0.01) & (np.linalg.norm(table[:, :3], axis=1) < 1e-6)
+    gap = scene.support_gap(np.asarray(log.object_pos), np.asarray(log.object_quat))
+    off_table = (gap > 0.01) & (np.linalg.norm(table[:, :3], axis=1) < 1e-6)
     hold = off_table & (np.linalg.norm(a_cap, axis=1) < 0.5)
     touch = np.linalg.norm(finger, axis=2).sum(axis=1) > 1e-3  # frames with hand contact
     success = env.failed_at is None and T == ref.num_frames and bool(np.all(pos_err <= 0.05))

@@ -1,5 +1,8 @@
 """MuJoCo scenes of the force pipeline: the simulated MANO hand, a catalogue object, a table.
 
+The table is a box of finite extent (:class:`dexcanvas_core.table.Table`; the trajectory's own,
+else the default), not an infinite plane.
+
 Objects are built from their primitive composition (``dexcanvas_core.demos.object_geometry``):
 primitives exactly, YCB items as the documented primitive compositions of that module, one
 geom per primitive with the catalogue mass spread over them by volume. The robot side
@@ -17,11 +20,13 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.mano.skeleton import HandSkeleton
 from dexcanvas_core.rotations import aa_to_quat_wxyz
 from dexcanvas_core.sim.hand import SimHand, add_hand
+from dexcanvas_core.table import DEFAULT_TABLE, Table
 
 OBJECT_BODY = "object"
 OBJECT_ANCHOR = "object_anchor"
@@ -104,12 +109,21 @@ def add_object(
     return body
 
 
-def add_table(spec: mujoco.MjSpec, friction: tuple[float, float, float] = (1.0, 0.005, 0.0001)):
-    """The table: a plane at z = 0 (world frame), the surface the demonstrations start on."""
+def add_table(
+    spec: mujoco.MjSpec,
+    table: Table | None = None,
+    friction: tuple[float, float, float] = (1.0, 0.005, 0.0001),
+):
+    """The table (``TABLE_GEOM``): a box of finite extent whose top is the surface the
+    demonstrations start on (``table``, default :data:`~dexcanvas_core.table.DEFAULT_TABLE`).
+    Beyond its edges nothing holds a hand or an object up."""
+    table = DEFAULT_TABLE if table is None else table
     g = spec.worldbody.add_geom(
         name=TABLE_GEOM,
-        type=mujoco.mjtGeom.mjGEOM_PLANE,
-        size=[1.0, 1.0, 0.01],
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=list(table.half_size),
+        pos=list(table.box_center),
+        quat=list(table.quat_wxyz),
         rgba=[0.6, 0.6, 0.6, 1.0],
         friction=list(friction),
     )
@@ -196,6 +210,8 @@ class SimScene:
     weld_eq: int
     fps: float
     physics: PhysicsSettings
+    table: Table | None = DEFAULT_TABLE
+    """The scene's table (``table_geom`` is -1 when it has none)."""
 
     @property
     def mass_kg(self) -> float:
@@ -204,6 +220,17 @@ class SimScene:
     @property
     def substeps(self) -> int:
         return self.physics.substeps
+
+    def support_gap(self, object_pos: np.ndarray, object_quat: np.ndarray) -> np.ndarray:
+        """``(...)`` height [m] of the posed object's lowest point above the table top, ``inf``
+        where its origin is beyond the table's edges or the scene has no table (nothing holds
+        it up); ``object_pos (..., 3)`` [m], ``object_quat (..., 4)`` (w, x, y, z)."""
+        p = np.asarray(object_pos, dtype=np.float64)
+        R = Rotation.from_quat(np.asarray(object_quat, dtype=np.float64), scalar_first=True)
+        low = np.asarray(self.geometry.lowest_z(R.as_matrix(), p), dtype=np.float64)
+        if self.table is None:
+            return np.full(low.shape, np.inf)
+        return self.table.height_above(np.concatenate([p[..., :2], low[..., None]], axis=-1))
 
     def object_pose(self, data: mujoco.MjData | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Object frame position [m] and quaternion (w, x, y, z) in the world."""
@@ -221,7 +248,7 @@ def build_scene(
     R_base: np.ndarray | None = None,
     mass_kg: float | None = None,
     friction_scale: float = 1.0,
-    table: bool = True,
+    table: Table | None = DEFAULT_TABLE,
 ) -> SimScene:
     """Compile the force pipeline's scene for one demonstration.
 
@@ -232,6 +259,7 @@ def build_scene(
         R_base: base frame of the wrist hinges (see :mod:`dexcanvas_core.sim.hand`).
         mass_kg: object mass (default the catalogue mass).
         friction_scale: multiplies the object's and table's sliding friction.
+        table: the table (the trajectory's, ``dexcanvas_core.table.table_of``); ``None``: none.
     """
     physics = PhysicsSettings() if physics is None else physics
     if not (np.isfinite(friction_scale) and friction_scale > 0):
@@ -267,9 +295,9 @@ def build_scene(
             reftype=mujoco.mjtObj.mjOBJ_BODY,
             refname=OBJECT_BODY,
         )
-    if table:
+    if table is not None:
         tf = np.array(physics.table_friction) * (friction_scale, 1.0, 1.0)
-        add_table(spec, friction=tuple(tf))
+        add_table(spec, table, friction=tuple(tf))
     model = spec.compile()
     data = mujoco.MjData(model)
     hand.bind(model)
@@ -291,4 +319,5 @@ def build_scene(
         weld_eq=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, "object_hold"),
         fps=float(fps),
         physics=physics,
+        table=table,
     )

@@ -45,6 +45,7 @@ from dexcanvas_core.sim.grip import carried_load, contact_keeping_force, squeeze
 from dexcanvas_core.sim.hand import FINGER_HINGES, HAND_JOINTS
 from dexcanvas_core.sim.reference import Reference
 from dexcanvas_core.sim.signal import moving_average
+from dexcanvas_core.table import DEFAULT_TABLE
 
 ACTION_NAMES: tuple[str, ...] = (
     "wrist_x", "wrist_y", "wrist_z", "wrist_rx", "wrist_ry", "wrist_rz",
@@ -221,6 +222,7 @@ class TrackingEnv:
             self.load = carried_load(
                 scene.geometry, ref.object_pos, ref.object_quat, ref.fps,
                 clear_m=self.cfg.grip_load_clear_m, lead_s=self.cfg.grip_load_lead_s,
+                table=scene.table if scene.table is not None else DEFAULT_TABLE,
             )  # fmt: skip
         if self.cfg.grip:
             offsets, self.grip_force = squeeze_offsets(
@@ -260,8 +262,7 @@ class TrackingEnv:
         self.t = 0
         self.failed_at: int | None = None
         self.log = TrackLog()
-        lowest = sc.geometry.lowest_z(_quat_to_R(ref.object_quat[0]), ref.object_pos[0])
-        airborne = float(lowest) > 0.005
+        airborne = float(sc.support_gap(ref.object_pos[0], ref.object_quat[0])) > 0.005
         n_settle = round((cfg.warmup_s if airborne else cfg.settle_s) / m.opt.timestep)
         if airborne:
             d.mocap_pos[sc.anchor_mocap] = ref.object_pos[0]

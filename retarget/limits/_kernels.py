@@ -314,16 +314,36 @@ def _boxes_apart(xpos, xmat, a, b, ea, eb):
     return False
 
 
-@kernel(F2, F2, I1, I1, I1, F1, B1, F2, F2, I1, I1, I1, F1)
+@njit(cache=True)
+def _sphere_box_apart(xpos, xmat, a, b, radius, eb):
+    """Whether the sphere of ``radius`` about geom ``a``'s centre misses box ``b`` (half sizes
+    ``eb``; pose from ``xpos`` and the row-major ``xmat``): the centre's distance from the
+    box (0 inside) is at least the radius."""
+    d2 = 0.0
+    for i in range(3):
+        t = 0.0
+        for k in range(3):
+            t += xmat[b, 3 * k + i] * (xpos[a, k] - xpos[b, k])
+        out = abs(t) - eb[i]
+        if out > 0.0:
+            d2 += out * out
+    return d2 >= radius * radius
+
+
+@kernel(F2, F2, I1, I1, I1, F1, B1, F2, F2, B1, F1, I1, I1, I1, F1)
 def broad_phase(
-    xpos, xmat, sph, sph_a, sph_b, reach2, boxes, box_a, box_b, pln, pln_a, pln_b, pln_reach
+    xpos, xmat, sph, sph_a, sph_b, reach2, boxes, box_a, box_b, obb, obb_reach,
+    pln, pln_a, pln_b, pln_reach,
 ):  # fmt: skip
     """The per-pair path's candidates (``CollisionLimit.candidates``): the pairs ``sph``
     whose geoms' centres ``xpos`` are closer than ``√reach2`` (and, for box–box pairs,
     ``boxes``, whose first box grown by the query distance (half sizes ``box_a``) meets the
-    second (``box_b``): a box within that distance of another lies in it grown so), then the
-    plane pairs ``pln`` whose hand geom's centre is less than ``pln_reach`` above the plane
-    (its frame's z axis from ``xmat``)."""
+    second (``box_b``): a box within that distance of another lies in it grown so; for the
+    other pairs whose second geom is a box, ``obb``, whose first geom's bounding sphere grown
+    by the query distance (radius ``obb_reach``) meets that box: a large box such as the table
+    has a bounding sphere that reaches everything), then the plane pairs ``pln`` whose hand
+    geom's centre is less than ``pln_reach`` above the plane (its frame's z axis from
+    ``xmat``)."""
     out = np.empty(sph.shape[0] + pln.shape[0], np.int64)
     m = 0
     for i in range(sph.shape[0]):
@@ -334,6 +354,8 @@ def broad_phase(
         if dx * dx + dy * dy + dz * dz >= reach2[i]:
             continue
         if boxes[i] and _boxes_apart(xpos, xmat, a, b, box_a[i], box_b[i]):
+            continue
+        if obb[i] and _sphere_box_apart(xpos, xmat, a, b, obb_reach[i], box_b[i]):
             continue
         out[m] = sph[i]
         m += 1

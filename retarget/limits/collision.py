@@ -10,7 +10,8 @@ retargeting scene), and the other hand body's point Jacobian for self-collision 
 Two ways to find the pairs within ``distmax``, with the same result:
 
 * per pair (default): a broad phase drops the pairs whose bounding spheres (MuJoCo's
-  ``geom_rbound`` about ``geom_xpos``; a plane's half-space) are farther apart than
+  ``geom_rbound`` about ``geom_xpos``; against a box, such as the table, the hand geom's
+  bounding sphere against the box; a plane's half-space) are farther apart than
   ``distmax``, all at once; the survivors go through ``mj_geomDistance`` one by one;
 * one sweep (:class:`ContactSweep`): ``mj_collision`` finds every contact within the model's
   geom margins in C, once per configuration, shared by several limits (hand–object and self
@@ -468,7 +469,12 @@ class CollisionLimit(Limit):
         self._box = (m.geom_type[self._sph_a] == box) & (m.geom_type[self._sph_b] == box)
         self._box_a = m.geom_size[self._sph_a] + distmax
         self._box_b = m.geom_size[self._sph_b].copy()
-        # Plane pairs (geom_b a plane, e.g. the table): the hand geom's bounding sphere against
+        # Other pairs with a box second (the table: a bounding sphere of some 0.7 m, so the
+        # sphere test keeps every hand geom) take the first geom's bounding sphere against the
+        # box.
+        self._obb = (m.geom_type[self._sph_b] == box) & ~self._box
+        self._obb_reach = m.geom_rbound[self._sph_a] + distmax
+        # Plane pairs (geom_b a plane, e.g. a floor): the hand geom's bounding sphere against
         # the plane's half-space.
         self._pln = pairs[b_plane]
         self._pln_a, self._pln_b = ga[self._pln], gb[self._pln]
@@ -483,7 +489,7 @@ class CollisionLimit(Limit):
         d = self.data
         return _kernels.broad_phase(
             d.geom_xpos, d.geom_xmat, self._sph, self._sph_a, self._sph_b, self._sph_reach2,
-            self._box, self._box_a, self._box_b,
+            self._box, self._box_a, self._box_b, self._obb, self._obb_reach,
             self._pln, self._pln_a, self._pln_b, self._pln_reach,
         )  # fmt: skip
 

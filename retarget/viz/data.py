@@ -273,9 +273,9 @@ def load_human(
 
     p = Pair.parse(pair)
     if dataset is None or str(dataset) == "built-in":
-        from dexcanvas_core.builtin import default_dataset_path
+        from dexcanvas_core.builtin import builtin_demonstration_path
 
-        path = default_dataset_path()
+        path = builtin_demonstration_path(p)
     else:
         path = Path(dataset)
     ds = open_dataset(path)
