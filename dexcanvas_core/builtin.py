@@ -23,6 +23,7 @@ network is needed.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import logging
 import os
 import sys
@@ -42,10 +43,26 @@ def cache_dir() -> Path:
 
 
 def builtin_dataset_name() -> str:
-    """File name of the cached built-in dataset (changes with the generator's version)."""
+    """File name of the cached built-in dataset: changes with the generator's version and with
+    the models given to catalogue objects (``--objects``, ``--objects-dir``), since the
+    demonstrations are generated on the shapes in use."""
     from dexcanvas_core.demos import DEMOS_VERSION
+    from dexcanvas_core.taxonomy import OBJECTS, custom_objects
 
-    return f"builtin-demos-v{DEMOS_VERSION}.lance"
+    given = [s for s in custom_objects().values() if s.id in OBJECTS]
+    return f"builtin-demos-v{DEMOS_VERSION}{_shapes_suffix(given)}.lance"
+
+
+def _shapes_suffix(specs) -> str:
+    """``""`` for the built-in shapes, else ``-objects-<hash>`` of the given models (file
+    contents, scale, mass, friction)."""
+    if not specs:
+        return ""
+    h = hashlib.sha256()
+    for spec in sorted(specs, key=lambda s: s.id):
+        h.update(f"{spec.id}|{spec.mesh_scale!r}|{spec.mass_kg!r}|{spec.friction!r}|".encode())
+        h.update(Path(spec.mesh).read_bytes())
+    return f"-objects-{h.hexdigest()[:12]}"
 
 
 @contextlib.contextmanager
@@ -100,7 +117,8 @@ def builtin_pair_path(pair) -> Path:
 
     p = pair if isinstance(pair, Pair) else Pair.parse(pair)
     folder = cache_dir() / f"builtin-demos-v{DEMOS_VERSION}-pairs"
-    return folder / f"{p.object.id}.{p.manipulation_type.name}.lance"
+    shape = _shapes_suffix([p.object] if p.object.mesh else [])
+    return folder / f"{p.object.id}.{p.manipulation_type.name}{shape}.lance"
 
 
 def builtin_demonstration_cached(pair) -> Path | None:
