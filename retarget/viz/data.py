@@ -25,6 +25,7 @@ from typing import Literal
 
 import numpy as np
 
+from dexcanvas_core.table import DEFAULT_TABLE, Table, table_of
 from dexcanvas_core.trajectory import CONTACT_PARTS, FORCE_GROUPS, Contacts, Trajectory, part_group
 from retarget.viz.errors import VizError
 
@@ -473,6 +474,8 @@ class SceneData:
     human_contacts: ContactFrames | None
     robot_contacts: ContactFrames | None
     metrics: dict
+    table: Table = DEFAULT_TABLE
+    """The demonstration's table (drawn as its box)."""
 
     @property
     def num_frames(self) -> int:
@@ -553,4 +556,5 @@ def scene_data(
         human_contacts=hc,
         robot_contacts=robot_contacts,
         metrics=m,
+        table=table_of(human) if human is not None else DEFAULT_TABLE,
     )

@@ -355,15 +355,14 @@ class MeshcatScene:
         vis["/Background"].set_property("top_color", list(style.BACKGROUND_RGB))
         vis["/Background"].set_property("bottom_color", list(style.BACKGROUND_RGB))
         self._set_camera(cam)
-        if self.options.show_table:
-            center = np.asarray(cam.lookat)
-            half = max(style.TABLE_HALF_SIZE, 0.5 * cam.distance)
+        if self.options.show_table:  # the demonstration's table, its finite box
+            table = self.data.table
             set_primitive(
                 self.root["table"],
                 "box",
-                [half, half, style.TABLE_THICKNESS / 2],
+                table.half_size,
                 style.TABLE_RGBA,
-                _pose(p=[center[0], center[1], -style.TABLE_THICKNESS / 2]),
+                _pose(_quat_to_matrix(np.asarray(table.quat_wxyz)), table.box_center),
             )
 
     def _set_camera(self, cam: style.CameraView) -> None:

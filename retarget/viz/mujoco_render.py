@@ -71,14 +71,14 @@ def build_model(hand, object_id: str, data, framing, options):
     spec.worldbody.add_light(
         pos=[0, 0, 3], dir=[0, 0, -1], diffuse=[0.4, 0.4, 0.4], castshadow=False
     )
-    if options.show_table:
-        c = np.asarray(framing.whole.lookat)
-        half = max(style.TABLE_HALF_SIZE, 0.5 * framing.whole.distance)
+    if options.show_table:  # the demonstration's table, its finite box
+        table = data.table
         spec.worldbody.add_geom(
             name="viz_table",
             type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=[half, half, style.TABLE_THICKNESS / 2],
-            pos=[c[0], c[1], -style.TABLE_THICKNESS / 2],
+            size=list(table.half_size),
+            pos=list(table.box_center),
+            quat=list(table.quat_wxyz),
             rgba=list(style.TABLE_RGBA),
             contype=0,
             conaffinity=0,

@@ -47,8 +47,6 @@ FORCE_SCALE_M_PER_N = 0.02
 """Force arrow length per newton [m/N] (2 cm per N)."""
 ARROW_MAX_LENGTH = 0.12
 """Longest force arrow [m]; larger forces are clipped to it."""
-TABLE_HALF_SIZE = 0.3  # [m] half-width of the drawn table patch
-TABLE_THICKNESS = 0.004  # [m]
 
 
 def group_color(group: int) -> RGBA:
