@@ -149,9 +149,14 @@ def test_objects_rest_on_the_table_centred(object_id):
 
 
 def test_primitive_objects_use_catalogue_sizes():
-    assert object_geometry("cube2").aabb_half == pytest.approx([0.026] * 3)
-    assert object_geometry("cylinder1").aabb_half == pytest.approx([0.025, 0.025, 0.06])
-    assert object_geometry("cylinder4").aabb_half == pytest.approx([0.076, 0.0065, 0.0065])
+    # the paper's sizes, posed as the catalogue places them (z up at rest)
+    assert object_geometry("cube2").aabb_half == pytest.approx([0.025] * 3)
+    assert object_geometry("cylinder1").aabb_half == pytest.approx([0.035, 0.035, 0.075])
+    assert object_geometry("cylinder4").aabb_half == pytest.approx([0.075, 0.005, 0.005])
+    assert object_geometry("cuboid1").aabb_half == pytest.approx([0.075, 0.075, 0.01])
+    assert object_geometry("cuboid2H").aabb_half == pytest.approx([0.075, 0.025, 0.0125])
+    assert object_geometry("cylinder5").aabb_half == pytest.approx([0.01, 0.01, 0.0135])
+    assert object_geometry("sphere3").rest_z == pytest.approx(0.01)
 
 
 # -- operators and hand -------------------------------------------------------------------------
