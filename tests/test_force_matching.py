@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from finger_scenes import finger_pressing_a_fixed_box
 
+from dexcanvas_core.taxonomy import OBJECTS
 from retarget.errors import RetargetError
 from retarget.force_matching import distribute, grasp_matrix, squeeze_offsets
 
@@ -623,7 +624,7 @@ def test_viz_replays_a_force_matching_run_exactly(human_with_forces, tmp_path):
 
 
 def test_cli_forces_lifts_the_heavy_cube_with_allegro(tmp_path):
-    """The issue's acceptance command: the heavy cube (cube2h, 3.3× cube2) on the built-in
+    """The issue's acceptance command: the heavy cube (cube2H, 3.3× cube2) on the built-in
     tripod demonstration, human forces from the force pipeline, matched on Allegro; the force
     squeeze first closes the gap the kinematic solution leaves (without that the fingers press
     0.2 N in the air and the cube drops)."""
@@ -637,7 +638,7 @@ def test_cli_forces_lifts_the_heavy_cube_with_allegro(tmp_path):
     assert rc == 0
     m = json.loads((out / "metrics.json").read_text())
     assert m["success"] and m["object_pos_err_max_m"] < 0.05
-    weight = 9.81 * 0.281  # cube2h
+    weight = 9.81 * OBJECTS["cube2H"].mass_kg  # the paper's 123 g
     pressed = m["finger_force_mean_n"]["th"]
     assert pressed > 0.5 * weight, m["finger_force_mean_n"]  # the thumb opposes the fingers
     assert m["object_force_error_mean_n"] < 0.15 * weight

@@ -170,9 +170,23 @@ def test_manipulation_type_filter_matches_every_stored_spelling(pub, spelling):
 
 
 def test_object_filter_goes_through_the_catalogue(pub):
-    # stored "cube2H"; the catalogue's id is "cube2h"
+    # stored "cube2H", the paper's spelling (the catalogue's id); any case finds it
     assert list(DexCanvasDataset(pub, objects="cube2h").uuids) == ["u2"]
     assert list(DexCanvasDataset(pub, objects="Cube2H").uuids) == ["u2"]
+
+
+def test_object_filter_finds_either_spelling_of_a_heavy_id(tmp_path):
+    # a release may store the heavy cube as "cube2H" or "cube2h": both rows are that object
+    rng = np.random.default_rng(1)
+    rows = [
+        public_row(rng, uuid=u, T=10, scene=scene, gesture="tripod", operator="op0")
+        for u, scene in (("a", "cube2h"), ("b", "cube2H"), ("c", "cube2"))
+    ]
+    path = tmp_path / "heavy.lance"
+    write_public_dataset(path, rows)
+    for spelling in ("cube2H", "cube2h", "CUBE2H", "cube2_heavy"):
+        assert sorted(DexCanvasDataset(path, objects=spelling).uuids) == ["a", "b"], spelling
+    assert list(DexCanvasDataset(path, objects="cube2").uuids) == ["c"]
 
 
 def test_filter_is_pushed_down_to_lance(pub):

@@ -687,14 +687,14 @@ def test_contact_ramp_rises_and_falls():
 
 
 def test_onsets_do_not_snap_the_wrist():
-    """Shadow on the built-in cylinder1/lateral_tripod: contacts switched on and off at full
+    """Shadow on the built-in cuboid3/lateral_tripod: contacts switched on and off at full
     weight in every direction (``contact_tangent_weight`` 1), with nothing else in the way,
-    move the retargeted wrist at up to 4.1 m/s (the human's at most 0.7 m/s); a 0.1 s contact
-    ramp keeps it below 2.5 m/s, and the default frame-to-frame bound (``max_wrist_speed``) at
-    1.5 m/s."""
+    move the retargeted wrist at up to 2.7 m/s (the human's at most 0.55 m/s); a 0.1 s contact
+    ramp keeps it below 2.5 m/s (0.8), and the default frame-to-frame bound
+    (``max_wrist_speed``) at 1.5 m/s per axis."""
     from dexcanvas_core.loaders.selection import load_demonstration
 
-    traj = load_demonstration("cylinder1/lateral_tripod")
+    traj = load_demonstration("cuboid3/lateral_tripod")
     geom = object_geometry(traj.object.name)
     peak = {}
     for name, cfg in {
@@ -825,7 +825,7 @@ def test_predicted_warm_start_takes_fewer_steps_without_overshooting():
     wrist's own jump there doubled it)."""
     from dexcanvas_core.loaders.selection import load_demonstration
 
-    traj = load_demonstration("cylinder1/lateral_tripod")
+    traj = load_demonstration("cuboid3/lateral_tripod")
     geom = object_geometry(traj.object.name)
     out = {}
     for ws in (False, True):

@@ -471,7 +471,7 @@ def test_contact_sweep_follows_the_object(demo_cube):
 @pytest.mark.parametrize(
     ("hand", "pair"),
     [
-        ("allegro", "cylinder5/tripod_variation"),
+        ("allegro", "cylinder4/tripod_variation"),
         ("leap", "cylinder2/extension_type"),
         ("leap", "mayonnaisebottle/large_diameter"),
     ],

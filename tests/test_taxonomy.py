@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import re
+from importlib import resources
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,6 +27,7 @@ from dexcanvas_core.taxonomy import (
     object_spec,
     types_in_group,
 )
+from dexcanvas_core.taxonomy.objects import CATALOGUE_FILE, CSV_COLUMNS, read_catalogue_rows
 
 # Leaves of the paper's taxonomy figure: (group, thumb, number of digits holding the object).
 FIGURE_LEAVES = {
@@ -173,15 +177,74 @@ def test_manipulation_type_is_frozen_and_validated():
 # ---- objects -----------------------------------------------------------------------------------
 
 
-def test_catalogue_has_30_objects():
-    assert len(OBJECTS) == 30
+PAPER_TABLE = Path(__file__).parent / "data" / "paper_objects.csv"
+SHARED_TABLE = Path(__file__).resolve().parents[1].parent / "shared" / "objects.csv"
+SIZE_COLUMNS = ("size_x_m", "size_y_m", "size_z_m", "diameter_m", "height_m")
+PAPER_HEAVY = {
+    "cube2H", "cuboid2H", "cuboid3H", "cylinder1H", "cylinder4H", "cylinder5H", "cylinder6H",
+    "sphere1H",
+}  # fmt: skip
+
+
+def _package_rows() -> list[dict[str, str]]:
+    text = resources.files("dexcanvas_core.taxonomy").joinpath(CATALOGUE_FILE).read_text()
+    return read_catalogue_rows(text)
+
+
+def _compare_with_paper(paper_csv: Path) -> None:
+    """Every row of the package catalogue against the paper's table: ids in order, sizes,
+    masses (exact), heavy duplicates and placements; a cell the paper leaves empty must be
+    filled by an estimate that the row's provenance marks as one."""
+    with paper_csv.open(newline="") as f:
+        paper = list(csv.DictReader(f))
+    ours = _package_rows()
+    assert [r["id"] for r in ours] == [r["id"] for r in paper]
+    assert list(OBJECTS) == [r["id"] for r in paper]
+    for p, o in zip(paper, ours, strict=True):
+        oid = p["id"]
+        spec = OBJECTS[oid]
+        prov = spec.provenance()
+        assert (o["description"], o["shape"], o["heavy_of"]) == (
+            p["description"], p["shape"], p["heavy_of"]
+        ), oid  # fmt: skip
+        assert prov["mass"] == prov["heavy_of"] == "paper", oid
+        assert float(o["mass_kg"]) == float(p["mass_kg"]) == spec.mass_kg, oid
+        assert spec.base_id == (p["heavy_of"] or None), oid
+        paper_sizes = {c: p[c] for c in SIZE_COLUMNS if p[c]}
+        if paper_sizes:
+            assert prov["size"] == "paper", oid
+            assert {c: float(o[c]) for c in SIZE_COLUMNS if o[c]} == {
+                c: float(v) for c, v in paper_sizes.items()
+            }, oid
+        else:
+            assert prov["size"].startswith("estimate, "), oid
+        if p["placement"]:
+            assert prov["placement"] == "paper", oid
+            assert o["placement"] == spec.placement == p["placement"], oid
+        else:
+            assert prov["placement"].startswith("estimate, ") and spec.placement, oid
+
+
+def test_catalogue_is_the_papers_table():
+    _compare_with_paper(PAPER_TABLE)
+
+
+@pytest.mark.skipif(not SHARED_TABLE.exists(), reason="no ../shared/objects.csv beside the repo")
+def test_catalogue_matches_the_shared_paper_table():
+    _compare_with_paper(SHARED_TABLE)
+
+
+def test_catalogue_has_the_papers_29_objects():
+    # The paper's text says "30-object set"; its table, and so the catalogue, has 29 rows.
+    assert len(OBJECTS) == 29
     primitives = [o for o in OBJECTS.values() if o.is_primitive and not o.heavy]
     heavy = [o for o in OBJECTS.values() if o.heavy]
     ycb = [o for o in OBJECTS.values() if o.source == "ycb"]
-    assert (len(primitives), len(heavy), len(ycb)) == (14, 9, 7)
+    assert (len(primitives), len(heavy), len(ycb)) == (14, 8, 7)
     expected = {"cube1", "cube2"} | {f"cuboid{i}" for i in (1, 2, 3)}
     expected |= {f"cylinder{i}" for i in range(1, 7)} | {f"sphere{i}" for i in (1, 2, 3)}
     assert {o.id for o in primitives} == expected
+    assert {o.id for o in heavy} == PAPER_HEAVY
     assert {o.id for o in ycb} == {
         "mayonnaisebottle",
         "banana",
@@ -193,18 +256,32 @@ def test_catalogue_has_30_objects():
     }
 
 
+def test_paper_values_spot_check():
+    # A few of the paper's numbers written out, independently of the CSV files.
+    assert OBJECTS["cube2"].size_m == (0.05,) and OBJECTS["cube2"].mass_kg == 0.037
+    assert OBJECTS["sphere1"].size_m == (0.04,) and OBJECTS["sphere1"].mass_kg == 0.013
+    assert OBJECTS["cylinder5"].size_m == (0.02, 0.027)
+    assert OBJECTS["cuboid1"].size_m == (0.15, 0.15, 0.02)
+    assert OBJECTS["powerdrill"].mass_kg == 0.228
+    assert OBJECTS["cube2H"].mass_kg == 0.123 and OBJECTS["cylinder1H"].mass_kg == 0.554
+
+
 def test_object_fields_are_consistent():
     for oid, o in OBJECTS.items():
-        assert oid == o.id == o.id.lower()
+        assert oid == o.id
         assert len(o.size_m) == len(SIZE_LAYOUT[o.shape])
         assert all(0 < v < 1 for v in o.size_m)
         assert 0 < o.mass_kg < 5
         assert o.placement
-        assert (o.shape == "ycb") == (o.source == "ycb")
+        assert (o.shape == "mesh") == (o.source == "ycb") == o.approximate
         assert len(o.bounding_box_m) == 3
         if o.is_primitive:
             assert o.ycb_id is None and o.volume_m3 > 0
-        # Every entry says where size, mass and placement come from.
+            assert o.inertia_diag_kg_m2 is not None
+        else:
+            assert o.volume_m3 is None and o.inertia_diag_kg_m2 is None
+        # Every entry says where size, mass, heavy set and placement come from.
+        assert set(o.provenance()) == {"size", "mass", "heavy_of", "placement"}, oid
         for fact in ("size:", "mass:", "placement:"):
             assert fact in o.data_source, (oid, fact)
 
@@ -217,19 +294,50 @@ def test_heavy_variants_have_a_lighter_base_of_the_same_size():
             continue
         base = OBJECTS[o.base_id]
         assert not base.heavy
-        assert o.id == f"{base.id}h"
-        assert (o.shape, o.size_m, o.source) == (base.shape, base.size_m, base.source)
+        assert o.id == f"{base.id}H"
+        assert (o.shape, o.size_m, o.source, o.placement) == (
+            base.shape, base.size_m, base.source, base.placement
+        )  # fmt: skip
         assert o.mass_kg > base.mass_kg
         assert heavy_variant(base) is o
-    assert heavy_variant("cuboid2") is None
+    assert heavy_variant("cuboid1") is None
+    assert heavy_variant("cube1") is None
 
 
-def test_estimated_values_are_marked():
-    # The paper's table was not found: every primitive mass is an estimate and says so.
-    for o in OBJECTS.values():
-        if o.is_primitive:
-            assert "mass: estimate" in o.data_source
-        assert "placement: estimate" in o.data_source
+def test_placements_follow_the_paper():
+    # cuboid1 large face down: 15 × 15 footprint, 2 cm high; cuboid2 long edge along x.
+    assert OBJECTS["cuboid1"].size_m[2] == 0.02
+    assert OBJECTS["cuboid2"].size_m[0] == max(OBJECTS["cuboid2"].size_m)
+    assert OBJECTS["cuboid2H"].placement == "long edge along X"
+    assert OBJECTS["powerdrill"].placement == "handle along Z"
+    assert OBJECTS["cylinder4"].lying and OBJECTS["cylinder4H"].lying
+    assert not OBJECTS["cylinder1"].lying and not OBJECTS["cylinder5"].lying
+    assert not OBJECTS["cube2"].lying  # only cylinders lie on their side
+
+
+def test_inertia_of_the_primitives():
+    m = OBJECTS["cube2"].mass_kg
+    assert OBJECTS["cube2"].inertia_diag_kg_m2 == pytest.approx((m * 0.05**2 / 6,) * 3)
+    m = OBJECTS["cuboid1"].mass_kg
+    ixx = m * (0.15**2 + 0.02**2) / 12
+    assert OBJECTS["cuboid1"].inertia_diag_kg_m2 == pytest.approx((ixx, ixx, m * 0.045 / 12))
+    m = OBJECTS["sphere1"].mass_kg
+    assert OBJECTS["sphere1"].inertia_diag_kg_m2 == pytest.approx((0.4 * m * 0.02**2,) * 3)
+    # a lying cylinder's axis is the object frame's x, a standing one's z
+    m = OBJECTS["cylinder4"].mass_kg
+    axial, radial = 0.5 * m * 0.005**2, m * (3 * 0.005**2 + 0.15**2) / 12
+    assert OBJECTS["cylinder4"].inertia_diag_kg_m2 == pytest.approx((axial, radial, radial))
+    m = OBJECTS["cylinder1H"].mass_kg
+    axial, radial = 0.5 * m * 0.035**2, m * (3 * 0.035**2 + 0.15**2) / 12
+    assert OBJECTS["cylinder1H"].inertia_diag_kg_m2 == pytest.approx((radial, radial, axial))
+
+
+def test_catalogue_rows_are_validated():
+    header = ",".join(CSV_COLUMNS)
+    with pytest.raises(ValidationError, match="missing columns"):
+        read_catalogue_rows("id,shape\ncube2,cube\n")
+    rows = read_catalogue_rows(f"# comment\n{header}\n" + "x,d,cube,0.05,0.05,0.05,,,0.1,,,p\n")
+    assert rows[0]["id"] == "x" and rows[0]["mass_kg"] == "0.1"
 
 
 @pytest.mark.parametrize(
@@ -238,8 +346,12 @@ def test_estimated_values_are_marked():
         ("cube2", "cube2"),
         ("CUBE2", "cube2"),
         (" Cube 2 ", "cube2"),
-        ("cube2H", "cube2h"),
-        ("cube2_heavy", "cube2h"),
+        ("cube2H", "cube2H"),
+        ("cube2h", "cube2H"),
+        ("Cube2H", "cube2H"),
+        ("cube2_heavy", "cube2H"),
+        ("sphere1 heavy", "sphere1H"),
+        ("CYLINDER4H", "cylinder4H"),
         ("mayonnaise bottle", "mayonnaisebottle"),
         ("Mayonnaise_Bottle", "mayonnaisebottle"),
         ("Large Clamp", "largeclamp"),
@@ -258,6 +370,10 @@ def test_unknown_object_suggests_close_matches():
         object_spec("cub2")
     with pytest.raises(UnknownNameError, match="'sphere3'"):
         object_spec("spher3")
+    with pytest.raises(UnknownNameError, match="'cylinder1H'"):
+        object_spec("cylinder1HH")
+    with pytest.raises(UnknownNameError):
+        object_spec("cube1H")  # the paper has no heavy large cube
     with pytest.raises(ValidationError, match="int"):
         object_spec(2)  # type: ignore[arg-type]
     spec = OBJECTS["bowl"]
@@ -274,16 +390,24 @@ def test_object_spec_is_frozen_and_validated():
         ObjectSpec("c", "C", "cube", (0.05,), -1.0, **ok)
     with pytest.raises(ValidationError, match="base_id"):
         ObjectSpec("c", "C", "cube", (0.05,), 0.1, heavy=True, **ok)
-    with pytest.raises(ValidationError, match="ycb"):
-        ObjectSpec("c", "C", "ycb", (0.05, 0.05, 0.05), 0.1, **ok)
-    with pytest.raises(ValidationError, match="lowercase"):
-        ObjectSpec("Cube", "C", "cube", (0.05,), 0.1, **ok)
+    with pytest.raises(ValidationError, match="mesh"):
+        ObjectSpec("c", "C", "cube", (0.05,), 0.1, source="ycb", **ok)
+    with pytest.raises(ValidationError, match="primitive"):
+        ObjectSpec("c", "C", "mesh", (0.05, 0.05, 0.05), 0.1, **ok)
+    for bad in ("", "cube/2", " cube2", "cube 2"):
+        with pytest.raises(ValidationError, match="id"):
+            ObjectSpec(bad, "C", "cube", (0.05,), 0.1, **ok)
+    spec = ObjectSpec(
+        id="Cube9H", name="C", shape="cube", size_m=(0.05,), mass_kg=0.1, placement="face down",
+        data_source="test",
+    )  # fmt: skip
+    assert spec.id == "Cube9H"
 
 
 def test_bounding_box_follows_the_size_layout():
-    assert OBJECTS["cube2"].bounding_box_m == (0.052,) * 3
-    assert OBJECTS["cylinder3"].bounding_box_m == (0.034, 0.034, 0.103)
-    assert OBJECTS["sphere1"].bounding_box_m == (0.08,) * 3
+    assert OBJECTS["cube2"].bounding_box_m == (0.05,) * 3
+    assert OBJECTS["cylinder3"].bounding_box_m == (0.03, 0.03, 0.10)
+    assert OBJECTS["sphere1"].bounding_box_m == (0.04,) * 3
     assert OBJECTS["bowl"].bounding_box_m == OBJECTS["bowl"].size_m
     assert OBJECTS["bowl"].volume_m3 is None
 
@@ -304,7 +428,9 @@ def test_pair_parse_and_str_round_trip():
 
 
 def test_pair_parse_normalises_spellings():
-    assert str(Pair.parse(" Cube2H / Lateral ")) == "cube2h/lateral_pinch"
+    assert str(Pair.parse(" Cube2H / Lateral ")) == "cube2H/lateral_pinch"
+    assert str(Pair.parse("cube2h/tripod")) == "cube2H/tripod"
+    assert Pair.parse("CUBE2H/tripod") == Pair.parse("cube2H/tripod")
     assert str(Pair.parse("banana/1")) == "banana/palmar_pinch"
     assert str(Pair.of(OBJECTS["bowl"], 9)) == "bowl/large_diameter"
 

@@ -47,11 +47,11 @@ from dexcanvas_core.trajectory import HandTrack, ObjectMove, ObjectTrack, Trajec
 
 log = logging.getLogger(__name__)
 
-DEMOS_VERSION = 5
+DEMOS_VERSION = 6
 """Bumped whenever generated content changes; part of the cached built-in dataset's name
 (version 1 was the scripted example of ``dexcanvas_core.example``; 4: grasps whose contact
-normals balance, ``grasp.GRIP_RATIO_MAX``; 5: six grasp retries instead of two, which changed
-6 of the 57 built-in demonstrations)."""
+normals balance, ``grasp.GRIP_RATIO_MAX``; 5: six grasp retries instead of two; 6: the
+paper's object catalogue — true sizes, masses and heavy set — and its feasibility table)."""
 
 CAP_MACHINE = "dexcanvas-demos"
 """``index.capMachine`` of generated demonstrations."""

@@ -5,14 +5,28 @@ and the object's shape, size, placement on the table and mass (``object_geometry
 is z-up at rest). Sizes are the extents of the object *as it rests*: ``width`` is its narrowest
 horizontal extent (what a hand spans from above), ``height`` its vertical extent.
 
-Hand capability bounds used below (estimates for an adult hand, stated once here):
+The objects are the paper's (``dexcanvas_core.taxonomy``): small ones among them — spheres of
+40, 30 and 20 mm, a 20 × 27 mm mini cylinder, a 10 mm rod — and a 150 × 150 × 20 mm plate.
+
+Hand capability bounds used below (estimates for an adult hand, stated once here; finger pads
+are ~15–19 mm thick, ``demos.hand``):
 
 * pad-to-pad precision grasps span at most ~70 mm with two digits, ~90 mm with three or four and
   ~100 mm with five (maximum grip aperture in reach-to-grasp studies stays under ~110–120 mm;
-  the pads must also wrap a little around the object);
+  the pads must also wrap a little around the object); four pads need an object ≥ 30 mm wide
+  to find room side by side;
 * power wraps fit cylinders of ~25–110 mm; the ring grasp (thumb and index around the object)
-  ~30–70 mm; power sphere grasps ~45–90 mm spheres, the five-fingertip precision sphere
-  ~55–90 mm (a smaller ball leaves no room for five pads);
+  ~30–70 mm;
+* power sphere grasps hold the ball against the palm with the pads: below ~30 mm the flexed
+  pads curl past a ball that touches the palm (such a ball is pinched, not wrapped), so the
+  three-finger power sphere takes 30–70 mm balls; the four-finger one needs ≥ 35 mm for the
+  ring finger's pad to reach the ball beside the index and middle; the five-fingertip precision
+  sphere needs ≥ 35 mm (five pads round a smaller ball have no room);
+* lateral (key) pinches press the object against the radial side of the curled index finger,
+  which stands ~20 mm above the table on its own thickness: the object must be ≥ 20 mm high;
+* the extension type spans a plate or disc edge to edge between the thumb and the extended
+  fingers: up to ~160 mm (the thumb-to-middle-finger span of an adult hand is ~180–200 mm);
+* sliding presses three pads on the object's top: it needs a top ≥ 30 mm wide;
 * YCB items are grasped by their graspable part: the bowl by its rim (palmar pinch, tripod,
   lateral pinch), the scissors by their loops, the drill by its handle, the pitcher and the
   bottle by their bodies;
@@ -108,8 +122,11 @@ def _mass(t: ObjectTraits, limit: float, what: str) -> Feasibility | None:
     return None
 
 
-def _pinch(limit_w: float, limit_m: float, what: str, min_w: float = 0.0) -> Rule:
-    """Fingertip grasps from above across the object's narrowest width."""
+def _pinch(
+    limit_w: float, limit_m: float, what: str, min_w: float = 0.0, min_h: float = 0.0
+) -> Rule:
+    """Fingertip grasps from above across the object's narrowest width ``≤ limit_w`` [m] (and
+    ``≥ min_w``) of an object at least ``min_h`` [m] high and at most ``limit_m`` [kg]."""
 
     def rule(t: ObjectTraits) -> Feasibility:
         if t.kind == "bowl":
@@ -130,6 +147,11 @@ def _pinch(limit_w: float, limit_m: float, what: str, min_w: float = 0.0) -> Rul
             return _no(f"narrowest width {t.mm} exceeds {what}'s {limit_w * 1e3:.0f} mm span")
         if t.width < min_w:
             return _no(f"{t.mm} is too thin for {what} (at least {min_w * 1e3:.0f} mm)")
+        if t.height < min_h:
+            return _no(
+                f"{t.height * 1e3:.0f} mm high: the curled index finger's side stands higher "
+                f"above the table than the object for {what} (at least {min_h * 1e3:.0f} mm)"
+            )
         return _mass(t, limit_m, what) or _yes(f"{what} across its {t.mm} width")
 
     return rule
@@ -171,8 +193,6 @@ def _wrap(lo: float, hi: float, what: str, kinds: tuple[str, ...], min_h: float)
 
 
 def _adducted_thumb(t: ObjectTraits) -> Feasibility:
-    if t.object_id.startswith("cuboid2"):
-        return _yes("power wrap from above around the 40 mm bar")
     return _wrap(0.025, 0.065, "an adducted-thumb wrap", _UPRIGHT, 0.08)(t)
 
 
@@ -183,9 +203,11 @@ def _distal(t: ObjectTraits) -> Feasibility:
 
 
 def _extension(t: ObjectTraits) -> Feasibility:
-    if t.kind in ("box", "disc") and t.flat and t.width <= 0.12:
-        return _yes(f"flat object, thumb and extended fingers on opposite edges {t.mm} apart")
-    return _no("the extension type holds a flat plate or disc by its edges")
+    if not (t.kind in ("box", "disc") and t.flat):
+        return _no("the extension type holds a flat plate or disc by its edges")
+    if t.width > 0.16:
+        return _no(f"{t.mm} exceeds the extension type's 160 mm edge-to-edge span")
+    return _yes(f"flat object, thumb and extended fingers on opposite edges {t.mm} apart")
 
 
 def _rod(max_d: float, what: str) -> Rule:
@@ -223,6 +245,8 @@ def _sliding(t: ObjectTraits) -> Feasibility:
             f"{t.height * 1e3:.0f} mm high on a {t.mm} base: it would tip over when pushed "
             "along the table"
         )
+    if t.width < 0.03:
+        return _no(f"its {t.mm} top has no room for three pads pressing it (at least 30 mm)")
     return _yes("pressed on the table and slid under the thumb, index and middle pads")
 
 
@@ -239,21 +263,21 @@ def _in_hand(what: str) -> Rule:
 
 RULES: dict[str, Rule] = {
     "ring": _wrap(0.03, 0.07, "a ring grasp", _UPRIGHT_ROUND, 0.08),
-    "sphere_3_finger": _sphere_only(0.045, 0.09, 2.0, "a three-finger power sphere"),
-    "sphere_4_finger": _sphere_only(0.045, 0.09, 2.0, "a four-finger power sphere"),
+    "sphere_3_finger": _sphere_only(0.03, 0.07, 2.0, "a three-finger power sphere"),
+    "sphere_4_finger": _sphere_only(0.035, 0.09, 2.0, "a four-finger power sphere"),
     "large_diameter": _wrap(0.045, 0.11, "a large-diameter wrap", _UPRIGHT, 0.05),
     "distal_type": _distal,
     "extension_type": _extension,
     "adducted_thumb": _adducted_thumb,
     "writing_tripod": _rod(0.032, "a writing tripod"),
     "tripod_variation": _rod(0.032, "a chopstick grip"),
-    "lateral_pinch": _pinch(0.055, 0.3, "a lateral pinch"),
-    "lateral_tripod": _pinch(0.055, 0.3, "a lateral tripod"),
+    "lateral_pinch": _pinch(0.055, 0.3, "a lateral pinch", min_h=0.02),
+    "lateral_tripod": _pinch(0.055, 0.3, "a lateral tripod", min_h=0.02),
     "palmar_pinch": _pinch(0.07, 0.5, "a palmar pinch"),
     "inferior_pincer": _pinch(0.05, 0.3, "an inferior pincer"),
     "tripod": _pinch(0.09, 1.0, "a tripod"),
     "quadpod": _pinch(0.09, 1.0, "a quadpod", min_w=0.03),
-    "precision_sphere": _sphere_only(0.055, 0.09, 1.0, "a precision sphere"),
+    "precision_sphere": _sphere_only(0.035, 0.09, 1.0, "a precision sphere"),
     "parallel_extension": _parallel_extension,
     "rolling": _rolling,
     "sliding": _sliding,
@@ -264,7 +288,7 @@ RULES: dict[str, Rule] = {
 
 @lru_cache(maxsize=1)
 def feasibility_table() -> dict[tuple[str, str], Feasibility]:
-    """``(object id, type name) → Feasibility`` for all 30 × 21 pairs of the catalogue."""
+    """``(object id, type name) → Feasibility`` for all 29 × 21 pairs of the catalogue."""
     table = {}
     for oid in OBJECTS:
         traits = object_traits(oid)

@@ -14,9 +14,10 @@ Primitive sizes follow MuJoCo's conventions so that a scene builder can copy the
 * ``capsule``: ``(radius, half_length)`` [m] of the cylindrical part, axis along z;
 * ``sphere``: ``(radius,)`` [m].
 
-Primitives of the catalogue are exact (sizes from ``ObjectSpec.size_m``). YCB-style items are
-documented compositions (``ObjectGeometry.description``) fitted to the catalogue's bounding box
-where that box is the object's own; masses always come from the catalogue.
+Primitives of the catalogue are exact (sizes from ``ObjectSpec.size_m``, the paper's table,
+posed as ``ObjectSpec.placement`` says). YCB-style items (``ObjectSpec.approximate``) are
+documented compositions (``ObjectGeometry.description``) sized after the catalogue's estimated
+boxes (DexRobot collision meshes) and the YCB proportions; masses always come from the catalogue.
 
 The signed distance of a union is the minimum of its primitives' exact signed distances: exact
 outside, and inside a lower bound of the depth where primitives overlap (conservative for a
@@ -461,11 +462,6 @@ _Y90 = (0.0, math.pi / 2, 0.0)  # turns a primitive's z axis onto the object's x
 _X90 = (math.pi / 2, 0.0, 0.0)  # turns a primitive's z axis onto the object's -y axis
 
 
-def _lying(placement: str) -> bool:
-    p = placement.lower()
-    return "lying on its side" in p or "lying along" in p
-
-
 # -- YCB-style compositions --------------------------------------------------------------------
 # Each returns (primitives, description). Dimensions in metres. They approximate the items'
 # shapes at the level a grasp needs (graspable widths, heights, loops, handles); the catalogue
@@ -484,7 +480,7 @@ def _mayonnaise() -> tuple[list[Primitive], str]:
     return prims, (
         "squeeze bottle standing on its base: a stadium-section body 101 × 62 × 160 mm (a box "
         "between two cylinders of radius 31 mm) and a cap of Ø 36 × 34 mm; total 101 × 62 × "
-        "194 mm, the catalogue's bounding box"
+        "194 mm, the catalogue's estimated box (the DexRobot collision mesh's)"
     )
 
 
@@ -539,7 +535,7 @@ def _bowl() -> tuple[list[Primitive], str]:
     return prims, (
         "bowl standing upright: a 5 mm wall of 16 slanted boxes from Ø 84 mm at the base to "
         "Ø 169 mm at the rim, 71 mm high, on a 5 mm base disc (YCB 024_bowl proportions, the "
-        "catalogue's bounding box)"
+        "catalogue's estimated box, the DexRobot collision mesh's)"
     )
 
 
@@ -603,7 +599,8 @@ def _drill() -> tuple[list[Primitive], str]:
     return prims, (
         "cordless drill standing on its battery: a battery block 116 × 67 × 48 mm, a handle "
         "34 × 33 mm in section tilted 12°, a Ø 62 × 150 mm motor body and a Ø 32 × 30 mm chuck "
-        "on top; about 190 × 67 × 197 mm (the catalogue's box; YCB 035_power_drill)"
+        "on top, handle along z; about 190 × 67 × 197 mm (the catalogue's estimated box, the "
+        "DexRobot collision mesh's; YCB 035_power_drill)"
     )
 
 
@@ -657,6 +654,8 @@ _YCB_BUILDERS: dict[str, Callable[[], tuple[list[Primitive], str]]] = {
 
 
 def _primitive_composition(spec: ObjectSpec) -> tuple[list[Primitive], str]:
+    """A primitive object as one MuJoCo-style primitive in the object frame (z up as the first
+    placement rests it; a lying cylinder's axis along x), and its description."""
     s = spec.size_m
     if spec.shape == "cube":
         e = s[0]
@@ -669,7 +668,7 @@ def _primitive_composition(spec: ObjectSpec) -> tuple[list[Primitive], str]:
     if spec.shape == "sphere":
         return [Primitive("sphere", (s[0] / 2,), name="sphere")], f"sphere Ø {s[0] * 1e3:.0f} mm"
     d, h = s
-    if _lying(spec.placement):
+    if spec.lying:
         return (
             [Primitive("cylinder", (d / 2, h / 2), rot_aa=_Y90, name="cylinder")],
             f"cylinder Ø {d * 1e3:.0f} × {h * 1e3:.0f} mm lying on its side, axis along x",

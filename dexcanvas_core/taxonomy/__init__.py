@@ -1,4 +1,4 @@
-"""DexCanvas taxonomy: the 21 manipulation types, the 30 objects, and object/type pairs.
+"""DexCanvas taxonomy: the 21 manipulation types, the 29 objects, and object/type pairs.
 
 >>> from dexcanvas_core.taxonomy import Pair, manipulation_type, object_spec
 >>> str(Pair.parse("cube2/tripod"))
@@ -6,9 +6,12 @@
 >>> manipulation_type("001-Palmar-Pinch").name
 'palmar_pinch'
 >>> object_spec("Cube 2").size_m
-(0.052,)
+(0.05,)
+>>> object_spec("cube2h").id
+'cube2H'
 
-Sources and estimates are documented in :mod:`.manipulation` and :mod:`.objects`.
+Sources and estimates are documented in :mod:`.manipulation` and :mod:`.objects` (the paper's
+object table has 29 rows although its text says "30-object set").
 """
 
 from dexcanvas_core.taxonomy.manipulation import (

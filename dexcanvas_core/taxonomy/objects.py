@@ -1,41 +1,50 @@
-"""The 30 DexCanvas objects: geometric primitives, their heavy variants, and YCB-style items.
+"""The DexCanvas objects: the paper's table of 29 objects, read from the package's ``objects.csv``.
 
-Ids are the lowercase strings the release stores in ``index.scene`` and
-``trajectory_metadata.object_names``: ``cube1``, ``cube2``, ``cuboid1``–``cuboid3``,
-``cylinder1``–``cylinder6``, ``sphere1``–``sphere3``, the heavy variants ``<id>h`` (the paper
-writes ``cube2H``; lookups ignore case) and ``banana``, ``bowl``, ``largeclamp``,
-``mayonnaisebottle``, ``pitcherbase``, ``powerdrill``, ``scissor`` (the release's spellings;
-``"mayonnaise bottle"``, ``"scissors"``, ``"011_banana"`` … are accepted too).
+The catalogue is the appendix table "List of objects" of the DexCanvas paper (Xu et al. 2025,
+arXiv 2510.15786), shipped as package data (``dexcanvas_core/taxonomy/objects.csv``) and read
+once at import. The paper's text speaks of a "30-object set", but its table has **29 rows**:
+14 geometric primitives, 8 weighted duplicates and 7 YCB-style household items. These 29 are the
+catalogue; there is no 30th object.
 
-Provenance, field by field, is in every entry's ``data_source``. In short:
+Ids are as the paper writes them: ``cube1``, ``cube2``, ``cuboid1``–``cuboid3``,
+``cylinder1``–``cylinder6``, ``sphere1``–``sphere3``; the heavy duplicates ``cube2H``,
+``cuboid2H``, ``cuboid3H``, ``cylinder1H``, ``cylinder4H``, ``cylinder5H``, ``cylinder6H``,
+``sphere1H``; and ``mayonnaisebottle``, ``banana``, ``bowl``, ``largeclamp``, ``pitcherbase``,
+``powerdrill``, ``scissor``. Lookups ignore case and separators (``"cube2h"``, ``"Cube2H"``,
+``"cube2_heavy"``, ``"mayonnaise bottle"``, ``"scissors"`` and ``"011_banana"`` all resolve), so a
+dataset row whose ``index.scene`` stores ``cube2h`` finds ``cube2H``.
 
-* **The paper's object table was not reachable** (only the abstract of arXiv 2510.15786 is in
-  the stored copies searched), so no value below is quoted from it.
-* **Sizes** of cube1, cube2, cylinder3, cylinder4, banana, bowl, largeclamp, mayonnaisebottle
-  and powerdrill are the axis-aligned bounding boxes of the DexRobot collision meshes of these
-  objects, as published in ``MindLab-Research/mint-vla-client-example``,
-  ``scripts/state56_native28_geometry_contract.json`` (``half_extents`` × 2, rounded to 1 mm).
-  Convex-decomposition hulls and marker mounts make them a few mm larger than the bare object.
-* **Other primitive sizes** are estimates from the proportions of the object renders on the
-  project page (``dexCanvas/dexcanvas.github.io``, ``assets/images/objects``); ``cylinder5`` is
-  not pictured there and is a pure guess.
-* **Primitive masses** are size × density estimates: 600 kg/m³ for the (3-D printed) light
-  objects, 2000 kg/m³ for the weighted ``H`` variants.
-* **Which nine primitives have heavy variants** was not found; the set below is a guess that
-  keeps the catalogue at the paper's 30 objects.
-* **YCB masses** are the Yale–CMU–Berkeley object set values (Calli et al. 2015);
-  ``scissor`` and ``pitcherbase`` sizes are that paper's dimensions as recalled (estimates).
-  The mayonnaise bottle is not a YCB object: its mass is YCB 006_mustard_bottle's (similar
-  size), an estimate.
-* **Placements** (how the object rests on the table at the start of a capture) are estimates.
+Every value's source is in the CSV's ``provenance`` column (``ObjectSpec.data_source``), field by
+field: ``paper`` (the table) or ``estimate, <reason>`` where the table gives a dash:
+
+* **Sizes, masses and the heavy set** are the paper's for every primitive and heavy duplicate.
+* **YCB-style items have no size in the paper** (their geometry is the released object models).
+  Until such a model is given, each is approximated by a built-in primitive composition
+  (``dexcanvas_core.demos.geometry``; ``ObjectSpec.approximate``). Their ``size_m`` is an
+  estimate: the bounding box of the DexRobot collision mesh of the item, as published in
+  ``MindLab-Research/mint-vla-client-example``, ``scripts/state56_native28_geometry_contract.json``
+  (``half_extents`` × 2, rounded to 1 mm, in that mesh's axes, marker mounts included); for
+  ``pitcherbase`` and ``scissor``, the YCB object set's dimensions as recalled. Their masses are
+  the paper's (e.g. ``powerdrill`` 0.228 kg, the printed replica, not YCB's 0.895 kg drill).
+* **Placements** (how the object rests on the table at the start of a capture) are the paper's
+  where it gives one (``cuboid1`` large face down, ``cuboid2`` long edge along X, ``powerdrill``
+  handle along Z, bases down); elsewhere an estimate with its reason (which cylinders stand,
+  which lie). ``cuboid1`` lists two placements; the first (large face down) is the object frame.
+
+Object frame: origin at the centre of the object's bounding box, **z up as the object rests**
+(``placement``). A cuboid's ``(x, y, z)`` size is laid out in that frame; a cylinder standing on an
+end face has its axis along z, one lying on its side (``lying``) along x.
 """
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import math
 import os
+import re
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
 from typing import Literal, get_args
 
@@ -51,7 +60,7 @@ from dexcanvas_core.objects.manifest import (
 from dexcanvas_core.objects.mesh import load_object_mesh
 from dexcanvas_core.taxonomy._lookup import build_index, lookup
 
-Shape = Literal["cube", "cuboid", "cylinder", "sphere", "ycb", "mesh"]
+Shape = Literal["cube", "cuboid", "cylinder", "sphere", "mesh"]
 Source = Literal["primitive", "ycb", "custom"]
 
 SHAPES: tuple[Shape, ...] = get_args(Shape)
@@ -61,16 +70,19 @@ SIZE_LAYOUT: dict[str, tuple[str, ...]] = {
     "cuboid": ("x", "y", "z"),
     "cylinder": ("diameter", "height"),
     "sphere": ("diameter",),
-    "ycb": ("x", "y", "z"),
     "mesh": ("x", "y", "z"),
 }
-"""Meaning of ``ObjectSpec.size_m`` per shape, all in metres (``ycb``: bounding box)."""
+"""Meaning of ``ObjectSpec.size_m`` per shape, all in metres (``mesh``: bounding box)."""
 
-LIGHT_DENSITY_KG_M3 = 600.0
-"""Estimated effective density of the light primitives (FDM-printed plastic with infill)."""
+CATALOGUE_FILE = "objects.csv"
+"""The catalogue's file inside this package (``dexcanvas_core.taxonomy``)."""
 
-HEAVY_DENSITY_KG_M3 = 2000.0
-"""Estimated effective density of the weighted ``H`` variants."""
+PROVENANCE_FIELDS: tuple[str, ...] = ("size", "mass", "heavy_of", "placement")
+"""The fields every ``data_source`` (the CSV's ``provenance``) accounts for, in order."""
+
+_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
+_LYING = re.compile(r"\b(side down|lying|lies|axis along x)\b")
+_PROVENANCE_SPLIT = re.compile(r";\s*(?=(?:" + "|".join(PROVENANCE_FIELDS) + r"):)")
 
 
 @dataclass(frozen=True)
@@ -78,22 +90,26 @@ class ObjectSpec:
     """One object of the DexCanvas catalogue.
 
     Attributes:
-        id: the release's object id (``index.scene``), lowercase, e.g. ``"cube2"``, ``"cube2h"``.
-        name: human-readable name, e.g. ``"Cube 2 (heavy)"``.
-        shape: ``"cube"``, ``"cuboid"``, ``"cylinder"``, ``"sphere"`` or ``"ycb"`` (a household
-            item modelled by a mesh or a primitive composition).
+        id: the object's id as the paper writes it (``index.scene`` of the release), e.g.
+            ``"cube2"``, ``"cube2H"``. Letters, digits, ``_``, ``.`` and ``-``; no ``/``.
+        name: human-readable name (the paper's description), e.g. ``"small cube (heavy)"``.
+        shape: ``"cube"``, ``"cuboid"``, ``"cylinder"``, ``"sphere"`` or ``"mesh"`` (an item
+            whose geometry is an object model; see ``approximate``).
         size_m: size [m] laid out per shape (see ``SIZE_LAYOUT``): cube ``(edge,)``, cuboid
-            ``(x, y, z)``, cylinder ``(diameter, height)``, sphere ``(diameter,)``, ycb bounding
-            box ``(x, y, z)``.
+            ``(x, y, z)`` in the object frame (z up at rest), cylinder ``(diameter, height)``,
+            sphere ``(diameter,)``, mesh bounding box ``(x, y, z)``.
         mass_kg: mass [kg].
-        placement: how the object rests on the table at the start of a capture.
-        heavy: True for the weighted ``H`` variants.
-        base_id: for a heavy variant, the id of the light object of the same size.
-        source: ``"primitive"`` (geometric primitive) or ``"ycb"`` (household item of the YCB
-            group of the paper's table).
+        placement: how the object rests on the table at the start of a capture (the paper's
+            words where it gives them, e.g. ``"long edge along X"``); alternatives are separated
+            by ``;`` and the first one defines the object frame.
+        heavy: True for the weighted ``H`` duplicates.
+        base_id: for a heavy duplicate, the id of the light object of the same geometry.
+        source: ``"primitive"`` (geometric primitive), ``"ycb"`` (household item of the YCB
+            group of the paper's table) or ``"custom"`` (a mesh object given by the user).
         ycb_id: YCB model id such as ``"011_banana"``, ``None`` for primitives and non-YCB items.
-        data_source: provenance of size, mass and placement; every value not taken from a
-            measurement or a published table starts with ``estimate``.
+        data_source: provenance of size, mass, heavy set and placement, ``"size: …; mass: …;
+            heavy_of: …; placement: …"``; ``paper`` is the paper's table, every other value
+            starts with ``estimate`` and gives its reason.
         aliases: other accepted spellings; lookups also ignore case and separators.
         mesh: path of the object's mesh file (its frame is the object frame), or ``None`` for
             the built-in geometry (``dexcanvas_core.demos.object_geometry``).
@@ -122,8 +138,12 @@ class ObjectSpec:
 
     def __post_init__(self) -> None:
         where = f"object {self.id!r}"
-        if not isinstance(self.id, str) or not self.id or self.id != self.id.lower():
-            raise ValidationError(f"{where}: id must be a non-empty lowercase string", field="id")
+        if not isinstance(self.id, str) or not _ID.fullmatch(self.id):
+            raise ValidationError(
+                f"{where}: an id is a non-empty string of letters, digits, '_', '.' or '-' "
+                "starting with a letter or digit (no spaces, no '/')",
+                field="id",
+            )
         if self.shape not in SHAPES:
             raise ValidationError(
                 f"{where}: shape {self.shape!r} is not one of {', '.join(SHAPES)}", field="shape"
@@ -145,10 +165,19 @@ class ObjectSpec:
             )
         if self.source not in get_args(Source):
             raise ValidationError(f"{where}: unknown source {self.source!r}", field="source")
-        if self.shape == "ycb" and self.source != "ycb":
-            raise ValidationError(f"{where}: shape 'ycb' goes with source 'ycb'", field="source")
-        if self.source == "custom" and self.mesh is None:
-            raise ValidationError(f"{where}: a custom object needs a mesh", field="mesh")
+        if self.source == "ycb" and self.shape != "mesh":
+            raise ValidationError(
+                f"{where}: a YCB item has shape 'mesh', got {self.shape!r}", field="shape"
+            )
+        if self.source == "primitive" and self.shape == "mesh":
+            raise ValidationError(
+                f"{where}: a primitive's shape is one of cube, cuboid, cylinder, sphere",
+                field="shape",
+            )
+        if self.source == "custom" and (self.shape != "mesh" or self.mesh is None):
+            raise ValidationError(
+                f"{where}: a custom object has shape 'mesh' and a mesh file", field="mesh"
+            )
         if self.ycb_id is not None and self.source != "ycb":
             raise ValidationError(f"{where}: only YCB items have a ycb_id", field="ycb_id")
         if self.heavy != (self.base_id is not None):
@@ -168,8 +197,9 @@ class ObjectSpec:
 
     @property
     def approximate(self) -> bool:
-        """The geometry stands in for the real object: a YCB-style item built from primitives
-        because no model of it was given (``--objects-dir``, a manifest)."""
+        """True when the object's geometry is the built-in primitive composition of
+        ``dexcanvas_core.demos.geometry`` standing in for the real object: a YCB-style item
+        whose model was not given (``--objects-dir``, a manifest)."""
         return self.source == "ycb" and self.mesh is None
 
     @classmethod
@@ -205,7 +235,7 @@ class ObjectSpec:
     def _from_checked_mesh(cls, oid, name, mesh, mass, friction, scale, inertia, note):
         ext = tuple(float(v) for v in mesh.extent_m)
         return cls(
-            id=oid.lower(),
+            id=oid,
             name=name,
             shape="mesh",
             size_m=ext,
@@ -220,8 +250,16 @@ class ObjectSpec:
         )
 
     @property
+    def lying(self) -> bool:
+        """True for a cylinder resting on its side (``placement`` says "side down" or
+        "lying"): its axis is the object frame's x. False for every other object."""
+        first = self.placement.split(";")[0].lower()
+        return self.shape == "cylinder" and _LYING.search(first) is not None
+
+    @property
     def bounding_box_m(self) -> tuple[float, float, float]:
-        """Axis-aligned extent (x, y, z) [m] in the object frame (cylinder axis along z)."""
+        """Axis-aligned extent (x, y, z) [m] with every cylinder axis on z (the catalogue's
+        layout, not the object frame of a lying cylinder)."""
         s = self.size_m
         if self.shape in ("cube", "sphere"):
             return (s[0], s[0], s[0])
@@ -231,8 +269,37 @@ class ObjectSpec:
 
     @property
     def volume_m3(self) -> float | None:
-        """Solid volume [m³] of a primitive; ``None`` for YCB items."""
+        """Solid volume [m³] of a primitive; ``None`` for mesh items."""
         return _primitive_volume(self.shape, self.size_m)
+
+    @property
+    def inertia_diag_kg_m2(self) -> tuple[float, float, float] | None:
+        """Principal moments of inertia ``(Ixx, Iyy, Izz)`` [kg·m²] about the centre of mass, in
+        the object frame (z up at rest; a lying cylinder's axis on x), of a homogeneous solid of
+        the catalogue size and mass. ``None`` for mesh items (``approximate`` ones have no true
+        geometry here)."""
+        m, s = self.mass_kg, self.size_m
+        if self.shape in ("cube", "cuboid"):
+            x, y, z = (s[0], s[0], s[0]) if self.shape == "cube" else s
+            return (m * (y * y + z * z) / 12, m * (x * x + z * z) / 12, m * (x * x + y * y) / 12)
+        if self.shape == "sphere":
+            i = 0.4 * m * (s[0] / 2) ** 2
+            return (i, i, i)
+        if self.shape == "cylinder":
+            r, h = s[0] / 2, s[1]
+            axial = 0.5 * m * r * r
+            radial = m * (3 * r * r + h * h) / 12
+            return (axial, radial, radial) if self.lying else (radial, radial, axial)
+        return None
+
+    def provenance(self) -> dict[str, str]:
+        """``data_source`` split by field: ``{"size": "paper", "placement": "estimate, …"}``."""
+        out = {}
+        for part in _PROVENANCE_SPLIT.split(self.data_source):
+            key, sep, text = part.partition(":")
+            if sep and key.strip() in PROVENANCE_FIELDS:
+                out[key.strip()] = text.strip()
+        return out
 
     def __str__(self) -> str:
         return self.id
@@ -250,163 +317,128 @@ def _primitive_volume(shape: str, s: tuple[float, ...]) -> float | None:
     return None
 
 
-# --- provenance strings -------------------------------------------------------------------------
-_AABB = (
-    "derived: DexRobot collision-mesh bounding box {dims} mm (public copy "
-    "MindLab-Research/mint-vla-client-example, scripts/state56_native28_geometry_contract.json)"
-)
-_RENDER = "estimate: proportions of the project-page render (dexCanvas/dexcanvas.github.io)"
-_UNPICTURED = "estimate: not pictured or listed anywhere found; a guess"
-_CALLI = "Calli et al. 2015, YCB object set table"
-# YCB masses checked against public copies of that table (e.g. 035_power_drill 0.895 kg,
-# 051_large_clamp 0.125 kg, 019_pitcher_base 0.178 kg).
-_PLACEMENT = "placement: estimate"
+# Spellings beyond the id that the release, YCB or users use (lookups also ignore case and
+# separators); heavy duplicates also answer to ``<base>_heavy`` and ``<base> heavy``.
+_ALIASES: dict[str, tuple[str, ...]] = {
+    "cylinder2": ("flat_cylinder",),
+    "mayonnaisebottle": ("mayonnaise_bottle", "mayonnaise", "bottle"),
+    "largeclamp": ("large_clamp", "clamp"),
+    "pitcherbase": ("pitcher_base", "pitcher"),
+    "powerdrill": ("power_drill", "drill"),
+    "scissor": ("scissors",),
+}
+
+# YCB model ids of the YCB-style items (the mayonnaise bottle is not a YCB object).
+_YCB_IDS: dict[str, str | None] = {
+    "mayonnaisebottle": None,
+    "banana": "011_banana",
+    "bowl": "024_bowl",
+    "largeclamp": "051_large_clamp",
+    "pitcherbase": "019_pitcher_base",
+    "powerdrill": "035_power_drill",
+    "scissor": "037_scissors",
+}
+
+CSV_COLUMNS: tuple[str, ...] = (
+    "id", "description", "shape", "size_x_m", "size_y_m", "size_z_m", "diameter_m", "height_m",
+    "mass_kg", "heavy_of", "placement", "provenance",
+)  # fmt: skip
+"""Columns of the package's ``objects.csv`` (the paper's table's, then ``provenance``)."""
 
 
-def _mass_note(density: float) -> str:
-    return f"mass: estimate, volume × {density:.0f} kg/m³"
+def read_catalogue_rows(text: str) -> list[dict[str, str]]:
+    """Rows of a catalogue CSV (``#`` lines are comments), as column → cell text.
+
+    Raises:
+        ValidationError: a missing column.
+    """
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    reader = csv.DictReader(lines)
+    missing = [c for c in CSV_COLUMNS if c not in (reader.fieldnames or ())]
+    if missing:
+        raise ValidationError(f"object catalogue: missing columns {missing}", field="columns")
+    return [{k: (v or "").strip() for k, v in row.items()} for row in reader]
 
 
-_PRIMITIVE_FACES = "on the table, resting on a face"
-_STANDING = "on the table, standing on an end face"
-_LYING = "on the table, lying on its side"
-
-# (id, name, shape, size_m, placement, size provenance, aliases)
-# fmt: off
-_PRIMITIVES: tuple[tuple[str, str, Shape, tuple[float, ...], str, str, tuple[str, ...]], ...] = (
-    ("cube1", "Cube 1", "cube", (0.085,), _PRIMITIVE_FACES,
-     _AABB.format(dims="86.7 × 87.3 × 81.2") + ", edge = mean extent", ()),
-    ("cube2", "Cube 2", "cube", (0.052,), _PRIMITIVE_FACES,
-     _AABB.format(dims="52.6 × 52.2 × 51.4") + ", edge = mean extent", ()),
-    ("cuboid1", "Cuboid 1 (plate)", "cuboid", (0.10, 0.10, 0.025),
-     "on the table, lying flat on its largest face", _RENDER + " (twice cube2's face)", ()),
-    ("cuboid2", "Cuboid 2 (bar)", "cuboid", (0.16, 0.04, 0.04),
-     "on the table, lying along its long axis", _RENDER, ()),
-    ("cuboid3", "Cuboid 3 (box)", "cuboid", (0.07, 0.05, 0.09), _PRIMITIVE_FACES, _RENDER, ()),
-    ("cylinder1", "Cylinder 1", "cylinder", (0.05, 0.12), _STANDING, _RENDER, ()),
-    ("cylinder2", "Cylinder 2 (disc)", "cylinder", (0.09, 0.03),
-     "on the table, lying flat on an end face", _RENDER, ("flat_cylinder",)),
-    ("cylinder3", "Cylinder 3", "cylinder", (0.034, 0.103), _STANDING,
-     _AABB.format(dims="34.1 × 34.8 × 103.1"), ()),
-    ("cylinder4", "Cylinder 4 (rod)", "cylinder", (0.013, 0.152), _LYING,
-     _AABB.format(dims="12.5 × 14.0 × 151.9"), ()),
-    ("cylinder5", "Cylinder 5", "cylinder", (0.03, 0.20), _LYING, _UNPICTURED, ()),
-    ("cylinder6", "Cylinder 6", "cylinder", (0.06, 0.09), _STANDING, _RENDER, ()),
-    ("sphere1", "Sphere 1", "sphere", (0.08,), "on the table, free to roll", _RENDER, ()),
-    ("sphere2", "Sphere 2", "sphere", (0.065,), "on the table, free to roll", _RENDER, ()),
-    ("sphere3", "Sphere 3", "sphere", (0.048,), "on the table, free to roll",
-     _RENDER + " (0.73 × sphere2, same camera)", ()),
-)
-
-HEAVY_BASES: tuple[str, ...] = (
-    "cube1", "cube2", "cuboid1", "cuboid3", "cylinder1", "cylinder3", "cylinder6", "sphere1",
-    "sphere2",
-)
-"""Light primitives that have a weighted ``H`` variant (estimate: the paper's list was not
-found; nine are needed for 14 primitives + 7 YCB items + 9 heavy = 30 objects)."""
-# fmt: on
+def _size(row: dict[str, str], shape: str) -> tuple[float, ...]:
+    where = f"object catalogue row {row['id']!r}"
+    names = {
+        "cube": ("size_x_m", "size_y_m", "size_z_m"),
+        "cuboid": ("size_x_m", "size_y_m", "size_z_m"),
+        "mesh": ("size_x_m", "size_y_m", "size_z_m"),
+        "cylinder": ("diameter_m", "height_m"),
+        "sphere": ("diameter_m",),
+    }.get(shape)
+    if names is None:
+        raise ValidationError(f"{where}: unknown shape {shape!r}", field="shape")
+    try:
+        values = tuple(float(row[n]) for n in names)
+    except ValueError:
+        raise ValidationError(
+            f"{where}: a {shape} needs numbers in {', '.join(names)}", field="size_m"
+        ) from None
+    if shape == "cube":
+        if len(set(values)) != 1:
+            raise ValidationError(f"{where}: a cube's three sizes differ: {values}", field="size_m")
+        return values[:1]
+    return values
 
 
-def _primitive(
-    oid: str,
-    name: str,
-    shape: Shape,
-    size: tuple[float, ...],
-    placement: str,
-    size_note: str,
-    aliases: tuple[str, ...],
-    *,
-    heavy: bool,
-) -> ObjectSpec:
-    density = HEAVY_DENSITY_KG_M3 if heavy else LIGHT_DENSITY_KG_M3
-    volume = _primitive_volume(shape, size)
-    if volume is None:  # pragma: no cover - _PRIMITIVES holds primitives only
-        raise RuntimeError(f"{oid} is not a primitive")
-    mass = round(volume * density, 3)
-    notes = [f"size: {size_note}", _mass_note(density), _PLACEMENT]
-    if heavy:
-        notes.append("heavy variant: estimate (which primitives have one was not found)")
-        return ObjectSpec(
-            f"{oid}h",
-            f"{name} (heavy)",
-            shape,
-            size,
-            mass,
-            placement,
-            heavy=True,
-            base_id=oid,
-            data_source="; ".join(notes),
-            aliases=(f"{oid}_heavy", f"{oid} heavy", *(f"{a}h" for a in aliases)),
-        )
+def _spec(row: dict[str, str]) -> ObjectSpec:
+    oid, shape, base = row["id"], row["shape"], row["heavy_of"] or None
+    where = f"object catalogue row {oid!r}"
+    try:
+        mass = float(row["mass_kg"])
+    except ValueError:
+        raise ValidationError(f"{where}: mass_kg {row['mass_kg']!r} is not a number") from None
+    is_mesh = shape == "mesh"
+    aliases = _ALIASES.get(base or oid, ())
+    if base is not None:
+        aliases = (f"{base}_heavy", f"{base} heavy", *(f"{a}H" for a in aliases))
+    ycb_id = _YCB_IDS.get(oid) if is_mesh else None
+    if ycb_id is not None:
+        aliases = (*aliases, ycb_id, ycb_id[4:])
     return ObjectSpec(
-        oid, name, shape, size, mass, placement, data_source="; ".join(notes), aliases=aliases
+        id=oid,
+        name=row["description"],
+        shape=shape,  # type: ignore[arg-type]
+        size_m=_size(row, shape),
+        mass_kg=mass,
+        placement=row["placement"],
+        heavy=base is not None,
+        base_id=base,
+        source="ycb" if is_mesh else "primitive",
+        ycb_id=ycb_id,
+        data_source=row["provenance"],
+        aliases=aliases,
     )
 
 
-# (id, name, ycb_id, bounding box [m], mass [kg], placement, provenance, aliases)
-# fmt: off
-_YCB: tuple[tuple[str, str, str | None, tuple[float, float, float], float, str, str,
-                  tuple[str, ...]], ...] = (
-    ("mayonnaisebottle", "Mayonnaise bottle", None, (0.101, 0.062, 0.194), 0.603,
-     "on the table, standing upright",
-     f"size: {_AABB.format(dims='101.5 × 62.4 × 194.2')}; mass: estimate, YCB "
-     f"006_mustard_bottle's 0.603 kg ({_CALLI}), a bottle of similar size; not a YCB object",
-     ("mayonnaise_bottle", "mayonnaise", "bottle")),
-    ("banana", "Banana", "011_banana", (0.095, 0.069, 0.220), 0.066,
-     "on the table, lying on its side",
-     f"size: {_AABB.format(dims='94.9 × 68.8 × 219.9')}; mass: {_CALLI}", ()),
-    ("bowl", "Bowl", "024_bowl", (0.169, 0.170, 0.071), 0.147,
-     "on the table, upright (opening up)",
-     f"size: {_AABB.format(dims='169.1 × 170.3 × 71.2')}; mass: {_CALLI}", ()),
-    ("largeclamp", "Large clamp", "051_large_clamp", (0.134, 0.053, 0.185), 0.125,
-     "on the table, lying flat",
-     f"size: {_AABB.format(dims='134.2 × 53.4 × 185.1')}; mass: {_CALLI}",
-     ("large_clamp", "clamp")),
-    ("pitcherbase", "Pitcher base", "019_pitcher_base", (0.108, 0.108, 0.235), 0.178,
-     "on the table, standing upright",
-     f"size: estimate, {_CALLI} as recalled (body 108 mm diameter × 235 mm; the handle adds "
-     "width); "
-     f"mass: {_CALLI}",
-     ("pitcher_base", "pitcher")),
-    ("powerdrill", "Power drill", "035_power_drill", (0.190, 0.067, 0.197), 0.895,
-     "on the table, standing on its battery base",
-     f"size: {_AABB.format(dims='189.5 × 67.4 × 197.5')}; mass: {_CALLI}",
-     ("power_drill", "drill")),
-    ("scissor", "Scissors", "037_scissors", (0.087, 0.200, 0.014), 0.082,
-     "on the table, lying flat",
-     f"size: estimate, {_CALLI} as recalled (87 × 200 × 14 mm); mass: {_CALLI}",
-     ("scissors",)),
-)
-# fmt: on
+def _load() -> dict[str, ObjectSpec]:
+    text = resources.files(__package__).joinpath(CATALOGUE_FILE).read_text(encoding="utf-8")
+    specs = [_spec(row) for row in read_catalogue_rows(text)]
+    by_id = {s.id: s for s in specs}
+    if len(by_id) != len(specs):  # pragma: no cover - a broken package file must fail loudly
+        raise RuntimeError(f"duplicate ids in {CATALOGUE_FILE}")
+    for s in specs:
+        missing = [f for f in PROVENANCE_FIELDS if f not in s.provenance()]
+        if missing:  # pragma: no cover
+            raise RuntimeError(f"{CATALOGUE_FILE}: {s.id} has no provenance for {missing}")
+        if s.base_id is not None:
+            base = by_id.get(s.base_id)
+            if base is None or base.heavy or (base.shape, base.size_m) != (s.shape, s.size_m):
+                raise RuntimeError(  # pragma: no cover
+                    f"{CATALOGUE_FILE}: {s.id} is not a heavy duplicate of {s.base_id}"
+                )
+    return by_id
 
 
-def _build() -> dict[str, ObjectSpec]:
-    specs: list[ObjectSpec] = []
-    for row in _PRIMITIVES:
-        specs.append(_primitive(*row, heavy=False))
-    for row in _PRIMITIVES:
-        if row[0] in HEAVY_BASES:
-            specs.append(_primitive(*row, heavy=True))
-    for oid, name, ycb_id, box, mass, placement, note, aliases in _YCB:
-        specs.append(
-            ObjectSpec(
-                oid,
-                name,
-                "ycb",
-                box,
-                mass,
-                placement,
-                source="ycb",
-                ycb_id=ycb_id,
-                data_source=f"{note}; {_PLACEMENT}",
-                aliases=(*aliases, *((ycb_id, ycb_id[4:]) if ycb_id else ())),
-            )
-        )
-    return {s.id: s for s in specs}
+OBJECTS: dict[str, ObjectSpec] = _load()
+"""The 29 objects by id, in the paper's order: 14 light primitives, their 8 heavy duplicates,
+then the 7 YCB-style items."""
 
-
-OBJECTS: dict[str, ObjectSpec] = _build()
-"""The 30 objects by id: 14 light primitives, their 9 heavy variants, then the 7 YCB items."""
+HEAVY_BASES: tuple[str, ...] = tuple(s.base_id for s in OBJECTS.values() if s.base_id)
+"""Light primitives that have a weighted ``H`` duplicate (the paper's eight)."""
 
 _BY_SPELLING = build_index(((s, (s.id, *s.aliases)) for s in OBJECTS.values()), "object")
 
@@ -414,8 +446,9 @@ _BY_SPELLING = build_index(((s, (s.id, *s.aliases)) for s in OBJECTS.values()), 
 def object_spec(object_id: str | ObjectSpec) -> ObjectSpec:
     """Look an object up by id or alias, ignoring case and separators.
 
-    ``"cube2"``, ``"Cube 2"``, ``"cube2H"`` (heavy variant), ``"mayonnaise_bottle"``,
-    ``"scissors"`` and ``"011_banana"`` all resolve. An :class:`ObjectSpec` is returned as is.
+    ``"cube2"``, ``"Cube 2"``, ``"cube2H"``, ``"cube2h"`` (heavy duplicate),
+    ``"mayonnaise_bottle"``, ``"scissors"`` and ``"011_banana"`` all resolve. An
+    :class:`ObjectSpec` is returned as is.
 
     Raises:
         UnknownNameError: unknown object; the message suggests close matches.
@@ -472,7 +505,7 @@ def _custom_specs(manifest: str | None, objects_dir: str | None) -> dict[str, Ob
             check_mass(spec.mass_kg, f"object {spec.id!r} with the model {f}", mesh.volume_m3)
             out[spec.id] = dataclasses.replace(
                 spec,
-                size_m=tuple(float(v) for v in mesh.extent_m) if spec.shape in ("ycb", "mesh")
+                size_m=tuple(float(v) for v in mesh.extent_m) if spec.shape == "mesh"
                 else spec.size_m,
                 mesh=mesh.source,
                 data_source=f"shape: model {f} (objects directory); {spec.data_source}",
@@ -543,7 +576,7 @@ def clear_objects() -> None:
 
 
 def heavy_variant(object_id: str | ObjectSpec) -> ObjectSpec | None:
-    """The weighted ``H`` variant of a light object, or ``None`` if it has none."""
+    """The weighted ``H`` duplicate of a light object, or ``None`` if it has none."""
     base = object_spec(object_id)
     heavy = next((s for s in OBJECTS.values() if s.base_id == base.id), None)
     return None if heavy is None else object_spec(heavy.id)
