@@ -371,3 +371,45 @@ def test_convex_parts_of_a_convex_mesh_are_its_hull(meshes):
     np.testing.assert_allclose(part.centroid, 0.0, atol=1e-12)
     # every plane's inside is the cube's: n·x + d ≤ 0 at the centre, = 0 at its face
     assert (part.planes[:, 3] < 0).all()
+
+
+# -- the command lines --------------------------------------------------------------------------
+
+
+def test_cli_refuses_bad_manifests_and_unknown_objects_before_any_work(meshes, tmp_path, capsys):
+    from dexcanvas_core.cli import main as dexcanvas_main
+    from retarget.cli import main as retarget_main
+
+    bad = _write_manifest(
+        tmp_path / "bad.toml", f'[w]\nmesh = "{meshes["open"]}"\nmass_kg = 0.05\n'
+    )
+    out = tmp_path / "run"
+    rc = retarget_main(["run", "--hand", "shadow", "--pair", "w/tripod", "--objects", str(bad),
+                        "--out", str(out)])  # fmt: skip
+    err = capsys.readouterr().err
+    assert rc == 2 and "object 'w'" in err and "not a closed surface" in err
+    assert not out.exists()  # nothing was started
+    rc = dexcanvas_main(["simulate", "--pair", "widget/tripod", "--out", str(tmp_path / "x.lance")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "unknown object 'widget'" in err and "--objects MANIFEST" in err
+
+
+@pytest.mark.slow
+def test_retarget_run_with_a_mesh_manifest_records_the_object(meshes, tmp_path):
+    """``retarget run --objects`` with cube2 given as a 5 cm mesh cube: the built-in
+    demonstration is generated on the mesh, the run succeeds and metrics.json says which
+    object shape was used."""
+    from retarget.cli import main as retarget_main
+
+    m = _write_manifest(
+        tmp_path / "m.toml", f'[cube2]\nmesh = "{meshes["cube"]}"\nmass_kg = 0.037\n'
+    )
+    out = tmp_path / "run"
+    rc = retarget_main(["run", "--hand", "shadow", "--pair", "cube2/tripod", "--objects", str(m),
+                        "--out", str(out)])  # fmt: skip
+    assert rc == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["success"] and metrics["approximate_object"] is False
+    rec = metrics["object"]
+    assert rec["shape_source"] == "mesh" and rec["mesh"] == str(meshes["cube"])
+    assert rec["mass_kg"] == 0.037 and rec["convex_parts"] == 1
