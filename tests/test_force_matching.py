@@ -1020,7 +1020,7 @@ def test_force_matching_backs_unloaded_touching_fingers_off_the_surface(human_wi
     out, ref = rt.retarget(traj), off.retarget(traj)
     tg = rt.human_targets(traj)
     idle = tg["contact_active"] & (np.linalg.norm(out.human_force, axis=2) <= 1e-3)
-    assert idle.sum() >= 20  # the middle finger grazes the cube on 40-odd frames here
+    assert idle.sum() >= 20  # the middle finger grazes the cube on 19 frames here, the index on 7
     np.testing.assert_allclose(out.q, ref.q)  # the kinematic solution is the same
     d_cmd, d_q = [], []
     for t, f in zip(*np.nonzero(idle), strict=True):
