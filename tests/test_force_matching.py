@@ -481,7 +481,7 @@ def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
     ``contact_tangent_weight=1``, and the earlier wrist and posture weights 0.3 and 1e-3: the
     defaults hold this one open loop): replayed open loop (default soft contacts) the cuboid
     slips out (at frame 304); the sampling MPC on the robot hand keeps it (DexCanvas rule, no
-    frame over 5 cm), moving the commands by millimetres."""
+    frame over 5 cm), moving the commanded wrist by under a millimetre (0.7 mm)."""
     from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.loaders.selection import load_demonstration
     from dexcanvas_core.rotations import aa_to_matrix
