@@ -24,12 +24,12 @@ from dexcanvas_core.trajectory import HandTrack, ObjectMove, ObjectTrack, Trajec
 
 log = logging.getLogger(__name__)
 
-EXAMPLE_VERSION = 1
+EXAMPLE_VERSION = 2
 """Bumped whenever the generated content changes (invalidates the cached built-in copy)."""
 
 EXAMPLE_PAIRS: tuple[str, ...] = (
     "cube2/tripod",
-    "cube1/palmar_pinch",
+    "cuboid3/palmar_pinch",
     "sphere1/precision_sphere",
     "cylinder1/large_diameter",
     "cuboid2/quadpod",

@@ -1199,11 +1199,20 @@ class Retargeter:
         # both solves them jointly through the joints they share (Shadow's WRJ0/1, SVH's
         # spread), which the force benchmark's (d) measured worse (five-finger correlation on
         # the same 61 successful runs 0.739 → 0.732, SVH cube2/sliding 0.83 → 0.63).
+        # The idle fingers' clearance is a distance: it grows along the surface normal at the
+        # finger's nearest point (the distance's gradient), which is not the human contact's
+        # where the robot finger sits on an edge the human's touched beside (Shadow's middle
+        # finger on cube2's vertical edge: 0.77 mm reached along the face's normal for 1 mm).
         target = np.where(pressed, 0.0, self.cfg.idle_contact_clearance or 0.0)
+        step_normals = normals[idx].copy()
+        if (~pressed).any() and self.geometry is not None:
+            R_o, p_o = fm["R_obj"][t], fm["p_obj"][t]
+            _, n_loc = self.geometry.sdf_and_normal((P[~pressed] - p_o) @ R_o)
+            step_normals[~pressed] = n_loc @ R_o.T
         for group in (pressed, ~pressed & (gap < target)):
             err = (gap - target)[group]
             if err.any():
-                delta = -(err[:, None] * normals[idx[group]]).reshape(-1)
+                delta = -(err[:, None] * step_normals[group]).reshape(-1)
                 dq = dq + _damped_step(Jall[group].reshape(-1, self.nq), delta)
         return self._within_limits(q + C @ dq) - q
 

@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from dexcanvas_core.demos.feasibility import feasibility
 from dexcanvas_core.example import EXAMPLE_PAIRS, OPERATORS, example_trajectories
 from dexcanvas_core.mano import HandSkeleton, measure_bone_lengths
 from dexcanvas_core.taxonomy import Pair
@@ -14,6 +15,7 @@ def trajs():
 def test_covers_pairs_and_operators_and_validates(trajs):
     assert len(trajs) == len(EXAMPLE_PAIRS) * len(OPERATORS)
     assert {f"{t.scene}/{t.gesture}" for t in trajs} == {str(Pair.parse(p)) for p in EXAMPLE_PAIRS}
+    assert all(feasibility(p).feasible for p in EXAMPLE_PAIRS)  # pairs a human hand can do
     for t in trajs:
         t.validate()
         assert t.is_generated

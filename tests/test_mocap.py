@@ -48,6 +48,7 @@ from dexcanvas_core.mocap.layout import (
     hand_marker_rest_positions,
 )
 from dexcanvas_core.rotations import aa_to_matrix, rotation_angle_between_aa
+from dexcanvas_core.taxonomy import OBJECTS
 from dexcanvas_core.trajectory import HandTrack, ObjectMove, ObjectTrack, Trajectory
 
 FPS = 120.0
@@ -124,7 +125,7 @@ def test_layout_has_14_hand_and_4_asymmetric_object_markers():
     palm = hand_marker_rest_positions(rest)[:3]
     assert distance_gap_m(palm) > MIN_DISTANCE_GAP_M  # a scalene triangle: labels recoverable
     table = object_marker_table()
-    assert len(table) == 30
+    assert len(table) == 29 and set(table) == set(OBJECTS)  # the paper's table: 29 objects
     for oid, P in table.items():
         assert P.shape == (4, 3), oid
         d = sorted(np.linalg.norm(P[i] - P[j]) for i, j in itertools.combinations(range(4), 2))

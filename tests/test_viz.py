@@ -229,28 +229,33 @@ def test_recorded_resimulation_is_the_run(scene_inputs):
     np.testing.assert_array_equal(sim.result.object_pos_sim, run.arrays["object_pos_sim"])
     assert sim.qpos.shape == run.arrays["q"].shape and np.isfinite(sim.qpos).all()
     # The simulated hand follows its command: wrist within 3 cm of the retargeted wrist
-    # (measured 1.2 cm; 4.9 cm when uniformly scaled keypoints left the thumb 2 cm short of
+    # (measured 1.1 cm; 4.9 cm when uniformly scaled keypoints left the thumb 2 cm short of
     # its contact target at onset and the retargeted wrist dived 6.8 cm to close the gap).
     assert np.abs(sim.qpos[:, :3] - run.arrays["q"][:, :3]).max() < 0.03
     groups = {FORCE_GROUPS[g] for g in sim.contacts.group[sim.contacts.valid]}
     # The thumb against a finger the human's tripod used (which one carries the cube is the
-    # grip plan's choice: here ~2.9 N on the thumb and the middle finger, ≤ 0.3 N on the index).
+    # grip plan's choice: here ~2.8 N on the thumb, ~2.4 N on the middle finger and ≤ 0.5 N on
+    # the index).
     assert "thumb" in groups and groups & {"index", "middle"}, groups
     # Forces are those of the hand on the object: they push into it, along the inward normal
-    # of the cube face each point is on (friction tilts a force, never past the face).
+    # of the cube face each point is on (friction tilts a force, never past the face). A point
+    # within 1 mm of two faces is on their edge (83 of the 194 here, the 5 cm cube's pads
+    # reach its edges) and pushes in through either face: the index finger on the +x face's
+    # top edge presses 0.4 N into it while lifting the cube by friction, upward against the
+    # top face's inward normal.
     from dexcanvas_core.rotations import aa_to_matrix
 
     t, k = np.nonzero(sim.contacts.valid)
     R = aa_to_matrix(sim.result.object_rot_sim[t])  # (n, 3, 3) cube → world
     local = np.einsum("nji,nj->ni", R, sim.contacts.pos_world[t, k] - sim.result.object_pos_sim[t])
-    axis = np.abs(local).argmax(axis=1)
-    n = np.arange(t.size)
-    inward = -R[n, :, axis] * np.sign(local[n, axis])[:, None]
+    on = np.abs(local) > np.abs(local).max(axis=1, keepdims=True) - 1e-3  # (n, 3) faces
     f = sim.contacts.force_world[t, k]
-    push = np.einsum("ij,ij->i", inward, f)
+    # (n, 3) the force along each axis' face's inward normal, −R[:, :, a] · sign(local_a)
+    push = -np.einsum("nia,ni->na", R, f) * np.sign(local)
+    into = (on & (push > 0)).any(axis=1)
     pressing = np.linalg.norm(f, axis=1) > 1e-6  # (points within the margin carry no force)
     assert pressing.sum() > 100
-    assert (push[pressing] > 0).mean() > 0.95, (push[pressing] > 0).mean()
+    assert into[pressing].mean() > 0.95, into[pressing].mean()
 
 
 def test_robot_bodies_map_onto_human_parts():
