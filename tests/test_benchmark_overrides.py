@@ -13,6 +13,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from force_pipeline import BenchConfig, parse_override, tracking_config
 
 from dexcanvas_core.errors import ValidationError
+from dexcanvas_core.sim.tracker import TrackingConfig
 
 
 def test_override_parses_python_literals():
@@ -32,7 +33,7 @@ def test_overrides_reach_the_tracking_config():
     cfg = BenchConfig(tracking=(("grip_force_min_n", 2), ("grip_force_floor_n", None)))
     tc = tracking_config(cfg)
     assert tc.grip_force_min_n == 2 and tc.grip_force_floor_n is None
-    assert tracking_config(BenchConfig()).grip_force_floor_n == 2.0  # the defaults otherwise
+    assert tracking_config(BenchConfig()).grip_force_floor_n == TrackingConfig().grip_force_floor_n
 
 
 @pytest.mark.parametrize(
