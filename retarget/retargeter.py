@@ -1204,11 +1204,15 @@ class Retargeter:
         # where the robot finger sits on an edge the human's touched beside (Shadow's middle
         # finger on cube2's vertical edge: 0.77 mm reached along the face's normal for 1 mm).
         target = np.where(pressed, 0.0, self.cfg.idle_contact_clearance or 0.0)
+        # A finger point inside the object (the solution's penetration margin) has no such
+        # gradient to trust near an edge (the nearest face from inside may not be the one it
+        # went through): it keeps the human contact's normal.
         step_normals = normals[idx].copy()
         if (~pressed).any() and self.geometry is not None:
             R_o, p_o = fm["R_obj"][t], fm["p_obj"][t]
-            _, n_loc = self.geometry.sdf_and_normal((P[~pressed] - p_o) @ R_o)
-            step_normals[~pressed] = n_loc @ R_o.T
+            d_loc, n_loc = self.geometry.sdf_and_normal((P[~pressed] - p_o) @ R_o)
+            idle = np.flatnonzero(~pressed)[d_loc > 0.0]
+            step_normals[idle] = n_loc[d_loc > 0.0] @ R_o.T
         for group in (pressed, ~pressed & (gap < target)):
             err = (gap - target)[group]
             if err.any():
