@@ -248,6 +248,26 @@ def progress_bar(console):
     )
 
 
+def git_commit() -> str | None:
+    """The checkout's commit (``git rev-parse --short HEAD``, ``+dirty`` with uncommitted
+    changes to tracked files), or ``None`` outside a git checkout."""
+    import subprocess
+
+    root = Path(__file__).resolve().parent.parent
+    try:
+        head = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
+            capture_output=True, text=True, check=True,
+        ).stdout.strip()  # fmt: skip
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True, text=True, check=True,
+        ).stdout.strip()  # fmt: skip
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return head + ("+dirty" if dirty else "")
+
+
 def versions(dists) -> dict:
     """Installed version of each distribution in ``dists`` (``None`` when absent)."""
     from importlib.metadata import PackageNotFoundError, version

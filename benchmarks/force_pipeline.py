@@ -78,6 +78,7 @@ import numpy as np
 from _common import (
     atomic_write_json,
     generate_one,
+    git_commit,
     operator_for,
     parse_override,
     pick_pairs,
@@ -759,6 +760,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         },
         "size_perturbation": SIZE_PERTURBATION,
         "demonstrations": [demos[i] for i in sorted(demos)],
+        "commit": git_commit(),
         "machine": {
             "platform": platform.platform(),
             "python": platform.python_version(),

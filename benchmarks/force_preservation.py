@@ -123,6 +123,7 @@ import numpy as np
 from _common import (
     atomic_write_json,
     config_overrides,
+    git_commit,
     load_demonstrations,
     parse_override,
     progress_bar,
@@ -1701,6 +1702,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         "hands": [h.name for h in hands],
         "five_finger_hands": five,
         "skipped": skipped,
+        "commit": git_commit(),
         "machine": {
             "platform": platform.platform(),
             "python": platform.python_version(),

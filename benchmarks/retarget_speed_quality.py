@@ -63,6 +63,7 @@ import numpy as np
 from _common import (
     atomic_write_json,
     config_overrides,
+    git_commit,
     load_demonstrations,
     parse_override,
     progress_bar,
@@ -458,6 +459,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         },
         "hands": [h.name for h in hands],
         "skipped": skipped,
+        "commit": git_commit(),
         "machine": {
             "platform": platform.platform(),
             "python": platform.python_version(),

@@ -24,14 +24,13 @@ from __future__ import annotations
 import argparse
 import json
 import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import mujoco
 import numpy as np
-from _common import atomic_write_json, progress_bar
+from _common import atomic_write_json, git_commit, progress_bar
 from rich.console import Console
 from rich.table import Table
 
@@ -96,16 +95,6 @@ def grasp_runs(object_id: str, hand_name: str) -> list[dict]:
         row["seconds"] = round(time.perf_counter() - t0, 1)
         out.append(row)
     return out
-
-
-def _commit() -> str:
-    try:
-        return subprocess.run(
-            ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
-            capture_output=True, text=True, check=True,
-        ).stdout.strip()  # fmt: skip
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def render_page(res: dict) -> str:
@@ -200,7 +189,7 @@ def main(argv=None) -> int:
         clear_objects()
     res = {
         "benchmark": "ycb_models",
-        "commit": _commit(),
+        "commit": git_commit(),
         "command": "python benchmarks/ycb_models.py " + " ".join(argv or sys.argv[1:]),
         "machine": {"platform": platform.platform(), "python": platform.python_version()},
         "models": str(args.objects_dir),
