@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import ConvexHull, cKDTree
 
+from dexcanvas_core.builtin import cache_dir
 from dexcanvas_core.errors import MissingDependencyError, ValidationError
 
 log = logging.getLogger(__name__)
@@ -511,8 +512,6 @@ class MeshCollision:
 
 def mesh_cache_dir() -> Path:
     """Where decompositions and grids are cached: ``<cache dir>/objects``."""
-    from dexcanvas_core.builtin import cache_dir  # light module; avoids a cycle through demos
-
     return cache_dir() / "objects"
 
 
