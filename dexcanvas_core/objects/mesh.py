@@ -62,7 +62,7 @@ SDF_MIN_SPACING_M = 0.001
 SDF_PAD_M = 0.03
 """Grid margin around the object [m]; beyond it distances are extrapolated."""
 
-CACHE_VERSION = 2
+CACHE_VERSION = 3
 """Bumped when the cached decomposition or grid changes meaning."""
 
 
@@ -243,6 +243,7 @@ def convex_parts(mesh: ObjectMesh) -> list[ConvexPart]:
     parts = coacd.run_coacd(
         coacd.Mesh(mesh.vertices, mesh.faces),
         threshold=COACD_THRESHOLD,
+        decimate=True,  # each part at most MAX_HULL_VERTICES vertices
         max_ch_vertex=MAX_HULL_VERTICES,
         seed=0,
     )
@@ -417,11 +418,19 @@ class SdfGrid:
         )
 
     def _inside(self, p: np.ndarray) -> np.ndarray:
-        """``(N,)`` points inside one of the parts."""
-        s = p @ self.planes[:, :3].T + self.planes[:, 3]  # (N, K), the parts' planes in order
+        """``(N,)`` points inside one of the parts (each part's planes tested only on the
+        points within its planes' bounding slab along the grid axes, in blocks)."""
+        inside = np.zeros(len(p), dtype=bool)
         starts = np.flatnonzero(np.r_[True, np.diff(self.part_of_plane) != 0])
-        worst = np.maximum.reduceat(s, starts, axis=1)  # per part: the most violated plane
-        return (worst <= 0.0).any(axis=1)
+        ends = np.r_[starts[1:], len(self.planes)]
+        for a, b in zip(starts, ends, strict=True):
+            planes = self.planes[a:b]
+            todo = np.flatnonzero(~inside)
+            for c in range(0, len(todo), 4096):
+                idx = todo[c : c + 4096]
+                worst = (p[idx] @ planes[:, :3].T + planes[:, 3]).max(axis=1)
+                inside[idx[worst <= 0.0]] = True
+        return inside
 
     def _exact(self, p: np.ndarray, i0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Distance and normal from the candidate triangles of the cells ``i0`` (see class)."""
