@@ -422,7 +422,7 @@ def test_inside_test_matches_the_parts_in_blocks(meshes):
 
     col = mesh_collision(load_object_mesh(meshes["bowl"]))
     rng = np.random.default_rng(3)
-    p = rng.uniform(-0.09, 0.09, (10_000, 3)) + [0.0, 0.0, 0.03]
+    p = rng.uniform(-0.09, 0.09, (10_000, 3)) + np.array([0.0, 0.0, 0.03])
     inside = col.sdf._inside(p)
     np.testing.assert_array_equal(inside, _inside_any(p, list(col.parts)))
     assert 0 < inside.sum() < len(p)
