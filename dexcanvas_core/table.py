@@ -12,10 +12,9 @@ The default, :data:`DEFAULT_TABLE`, is a 1.2 m × 0.8 m top at z = 0 (the height
 catalogue's rest poses and every built-in demonstration are expressed against), centred under
 the built-in demonstrations' objects (x = 0.42 m, y = 0; their start positions are drawn within
 ±3 cm in x and ±5 cm in y of it, ``dexcanvas_core.demos.demo.generate_demo``), long side along
-x. On the 57 built-in demonstrations the hand keypoints span x 0.02–0.60 m and y -0.30–0.21 m,
-the objects x 0.33–0.52 m and y -0.17–0.14 m: every keypoint lies at least 9 cm inside the
-edges, every object position at least 23 cm. The size is that of a common lab bench, not a
-measured property of the DexCanvas capture table, whose dimensions the paper does not give.
+x, so the built-in demonstrations' hands and objects stay well inside its edges. The size is
+that of a common lab bench, not a measured property of the DexCanvas capture table, whose
+dimensions the paper does not give.
 """
 
 from __future__ import annotations

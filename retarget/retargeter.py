@@ -1201,8 +1201,7 @@ class Retargeter:
         # the same 61 successful runs 0.739 → 0.732, SVH cube2/sliding 0.83 → 0.63).
         # The idle fingers' clearance is a distance: it grows along the surface normal at the
         # finger's nearest point (the distance's gradient), which is not the human contact's
-        # where the robot finger sits on an edge the human's touched beside (Shadow's middle
-        # finger on cube2's vertical edge: 0.77 mm reached along the face's normal for 1 mm).
+        # where the robot finger sits on an edge the human touched beside.
         target = np.where(pressed, 0.0, self.cfg.idle_contact_clearance or 0.0)
         # A finger point inside the object (the solution's penetration margin) has no such
         # gradient to trust near an edge (the nearest face from inside may not be the one it

@@ -70,15 +70,10 @@ class TrackingConfig:
     enough; lighter ones get less (``grip_force_floor_n``)."""
     grip_force_floor_n: float | None = 1.0
     """Light objects: the contact-keeping force is ``grip_force_weight_k`` times the object's
-    weight, clipped to [``grip_force_floor_n``, ``grip_force_min_n``] (people grip a light
+    weight, clipped to [``grip_force_floor_n``, ``grip_force_min_n``] [N] (people grip a light
     object more gently, grip force following the load;
     :func:`~dexcanvas_core.sim.grip.contact_keeping_force`). ``None``: ``grip_force_min_n``
-    for every object (4 N per pad on an 85 g cylinder pinched from above pressed it down with
-    7 × its weight, and it slid out of the pinch at lift-off). Measured on the force-pipeline
-    benchmark's clean suite (32 pairs and their 9 heavy duplicates, the paper's objects, most
-    of them under 150 g): a 2 N floor grips the heavy duplicate 1.7 × as hard as the light
-    object for a 3.3 × mass ratio (0.59 of it per pair); 1 N: 2.6 × (0.80), the same 29 of 32
-    and 7 of 9 lifted; 0.2 N: 4.0 × (1.22), but two more light objects dropped."""
+    for every object. How the value was chosen: ``CHANGELOG.md``."""
     grip_force_weight_k: float = 2.7
     """Light objects' contact-keeping force in object weights (2.7 · m·g reaches the 4 N of
     ``grip_force_min_n`` at 150 g, the lightest object 4 N was measured to hold)."""
