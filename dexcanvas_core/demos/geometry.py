@@ -21,7 +21,12 @@ boxes (DexRobot collision meshes) and the YCB proportions; masses always come fr
 
 The signed distance of a union is the minimum of its primitives' exact signed distances: exact
 outside, and inside a lower bound of the depth where primitives overlap (conservative for a
-penetration check). Normals are the gradient of the minimising primitive's distance.
+penetration check). Normals are the gradient of the minimising primitive's distance. Objects
+given as meshes (``dexcanvas_core.objects``) are unions of convex parts whose distance comes from
+their signed-distance grid instead.
+
+The primitives and their distances are in :mod:`.primitives`, the YCB-style compositions in
+:mod:`.ycb_shapes`.
 """
 
 from __future__ import annotations
@@ -29,200 +34,18 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 
+from dexcanvas_core.demos.primitives import Primitive, sdf_local
+from dexcanvas_core.demos.ycb_shapes import YCB_BUILDERS
 from dexcanvas_core.errors import ValidationError
-from dexcanvas_core.objects.mesh import (
-    ConvexPart,
-    ObjectMesh,
-    SdfGrid,
-    load_object_mesh,
-    mesh_collision,
-)
-from dexcanvas_core.rotations import aa_to_matrix, matrix_to_aa
+from dexcanvas_core.objects.mesh import ObjectMesh, SdfGrid, load_object_mesh, mesh_collision
+from dexcanvas_core.rotations import aa_to_matrix
 from dexcanvas_core.taxonomy import ObjectSpec, object_spec
-
-PrimitiveType = Literal["box", "cylinder", "sphere", "capsule", "mesh"]
-PRIMITIVE_TYPES: tuple[str, ...] = ("box", "cylinder", "sphere", "capsule", "mesh")
-_SIZE_LEN = {"box": 3, "cylinder": 2, "sphere": 1, "capsule": 2, "mesh": 3}
-_EPS = 1e-12
-
-
-@dataclass(frozen=True)
-class Primitive:
-    """One solid primitive of an object, posed in the object frame.
-
-    Attributes:
-        type: ``"box"``, ``"cylinder"``, ``"sphere"``, ``"capsule"`` or ``"mesh"`` (a convex
-            part of a mesh object, :class:`~dexcanvas_core.objects.mesh.ConvexPart`).
-        size: half sizes [m] in MuJoCo's layout (see the module docstring); for a mesh part,
-            the half extents of its bounding box.
-        pos: ``(3,)`` position of the primitive's centre in the object frame [m] (a mesh
-            part's vertices are in the object frame: its pos is the origin).
-        rot_aa: ``(3,)`` orientation of the primitive frame in the object frame, axis-angle [rad].
-        name: a label (``"body"``, ``"cap"``, …).
-        part: the convex part of a ``"mesh"`` primitive, ``None`` otherwise.
-    """
-
-    type: PrimitiveType
-    size: tuple[float, ...]
-    pos: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    rot_aa: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    name: str = ""
-    part: ConvexPart | None = field(default=None, compare=False, repr=False)
-
-    @classmethod
-    def from_part(cls, part: ConvexPart, name: str = "") -> Primitive:
-        """A ``"mesh"`` primitive of a convex part (vertices in the object frame)."""
-        half = 0.5 * (part.vertices.max(axis=0) - part.vertices.min(axis=0))
-        return cls("mesh", tuple(np.maximum(half, 1e-6)), name=name, part=part)
-
-    def __post_init__(self) -> None:
-        if self.type not in PRIMITIVE_TYPES:
-            raise ValidationError(
-                f"unknown primitive type {self.type!r}; valid: {', '.join(PRIMITIVE_TYPES)}",
-                field="type",
-            )
-        size = tuple(float(s) for s in self.size)
-        if len(size) != _SIZE_LEN[self.type] or not all(math.isfinite(s) and s > 0 for s in size):
-            raise ValidationError(
-                f"a {self.type} needs {_SIZE_LEN[self.type]} positive half sizes [m], got {size}",
-                field="size",
-            )
-        if (self.type == "mesh") != (self.part is not None):
-            raise ValidationError("a mesh primitive needs its convex part, and only it has one")
-        object.__setattr__(self, "size", size)
-        object.__setattr__(self, "pos", tuple(float(v) for v in self.pos))
-        object.__setattr__(self, "rot_aa", tuple(float(v) for v in self.rot_aa))
-
-    @property
-    def volume(self) -> float:
-        """Solid volume [m³]."""
-        s = self.size
-        if self.type == "box":
-            return 8.0 * s[0] * s[1] * s[2]
-        if self.type == "sphere":
-            return 4.0 / 3.0 * math.pi * s[0] ** 3
-        if self.type == "cylinder":
-            return math.pi * s[0] ** 2 * 2.0 * s[1]
-        if self.type == "capsule":
-            return math.pi * s[0] ** 2 * 2.0 * s[1] + 4.0 / 3.0 * math.pi * s[0] ** 3
-        return self.part.volume_m3
-
-    @property
-    def centroid(self) -> np.ndarray:
-        """``(3,)`` centre of volume in the object frame [m]."""
-        if self.type == "mesh":
-            return self.part.centroid
-        return np.asarray(self.pos, dtype=np.float64)
-
-    @property
-    def R(self) -> np.ndarray:
-        """``(3, 3)`` rotation of the primitive frame in the object frame."""
-        return aa_to_matrix(np.asarray(self.rot_aa, dtype=np.float64))
-
-    def local_aabb_half(self) -> np.ndarray:
-        """``(3,)`` half extents of the primitive's bounding box in its own frame [m]."""
-        s = self.size
-        if self.type == "mesh":  # about the object frame's origin, where the part's pos is
-            return np.abs(self.part.vertices).max(axis=0)
-        if self.type == "box":
-            return np.array(s)
-        if self.type == "sphere":
-            return np.full(3, s[0])
-        if self.type == "cylinder":
-            return np.array([s[0], s[0], s[1]])
-        return np.array([s[0], s[0], s[1] + s[0]])
-
-    def aabb(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(lo, hi)`` axis-aligned bounds in the object frame [m] (tight for all four types)."""
-        if self.type == "mesh":
-            return self.part.vertices.min(axis=0), self.part.vertices.max(axis=0)
-        R = self.R
-        c = np.asarray(self.pos)
-        s = self.size
-        if self.type == "box":
-            half = np.abs(R) @ np.array(s)
-        elif self.type == "sphere":
-            half = np.full(3, s[0])
-        else:  # cylinder / capsule, axis a = R e_z
-            a = R[:, 2]
-            r, h = s
-            if self.type == "cylinder":
-                half = h * np.abs(a) + r * np.sqrt(np.clip(1.0 - a * a, 0.0, 1.0))
-            else:
-                half = h * np.abs(a) + r
-        return c - half, c + half
-
-    def to_dict(self) -> dict:
-        out = {
-            "type": self.type,
-            "size": list(self.size),
-            "pos": list(self.pos),
-            "rot_aa": list(self.rot_aa),
-            "name": self.name,
-        }
-        if self.part is not None:
-            out["vertices"] = len(self.part.vertices)
-        return out
-
-
-def _sdf_local(kind: str, size: tuple[float, ...], p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Exact signed distance ``(N,)`` [m] and its gradient ``(N, 3)`` for points ``p (N, 3)``
-    given in the primitive's frame."""
-    if kind == "sphere":
-        n = np.linalg.norm(p, axis=-1)
-        g = p / np.maximum(n, _EPS)[:, None]
-        g[n < _EPS] = (0.0, 0.0, 1.0)
-        return n - size[0], g
-    if kind == "capsule":
-        r, h = size
-        q = p.copy()
-        q[:, 2] -= np.clip(p[:, 2], -h, h)
-        n = np.linalg.norm(q, axis=-1)
-        g = q / np.maximum(n, _EPS)[:, None]
-        g[n < _EPS] = (1.0, 0.0, 0.0)
-        return n - r, g
-    rows = np.arange(p.shape[0])
-    if kind == "box":
-        sgn = np.where(p < 0, -1.0, 1.0)
-        q = np.abs(p) - np.asarray(size)
-        qp = np.maximum(q, 0.0)
-        out_n = np.linalg.norm(qp, axis=-1)
-        inside = out_n < _EPS
-        k = np.argmax(q, axis=-1)
-        d = np.where(inside, q[rows, k], out_n)
-        g = sgn * qp / np.maximum(out_n, _EPS)[:, None]
-        if inside.any():
-            gi = np.zeros_like(p)
-            gi[rows, k] = sgn[rows, k]
-            g[inside] = gi[inside]
-        return d, g
-    # cylinder, axis z: a 2-D box in (radial distance, |z|)
-    r, h = size
-    rho = np.hypot(p[:, 0], p[:, 1])
-    ok = rho > _EPS
-    safe = np.where(ok, rho, 1.0)
-    q0 = rho - r
-    q1 = np.abs(p[:, 2]) - h
-    a0, a1 = np.maximum(q0, 0.0), np.maximum(q1, 0.0)
-    out_n = np.hypot(a0, a1)
-    inside = out_n < _EPS
-    d = np.where(inside, np.maximum(q0, q1), out_n)
-    inv = 1.0 / np.maximum(out_n, _EPS)
-    w_rad = np.where(inside, (q0 >= q1) * 1.0, a0 * inv)
-    w_ax = np.where(inside, (q0 < q1) * 1.0, a1 * inv)
-    g = np.empty_like(p)
-    g[:, 0] = w_rad * np.where(ok, p[:, 0] / safe, 1.0)
-    g[:, 1] = w_rad * np.where(ok, p[:, 1] / safe, 0.0)
-    g[:, 2] = w_ax * np.where(p[:, 2] < 0, -1.0, 1.0)
-    return d, g
 
 
 @dataclass(frozen=True)
@@ -297,7 +120,7 @@ class ObjectGeometry:
             return d.reshape(lead), g.reshape((*lead, 3))
         prims = self.primitives
         if len(prims) == 1:
-            d, g = _sdf_local(prims[0].type, prims[0].size, (flat - self._c[0]) @ self._R[0])
+            d, g = sdf_local(prims[0].type, prims[0].size, (flat - self._c[0]) @ self._R[0])
             return d.reshape(lead), (g @ self._R[0].T).reshape((*lead, 3))
         # Union: minimum over primitives. A primitive lies inside its bounding sphere (centre c,
         # radius rho), so |p - c| - rho bounds its distance from below and |p - c| + rho from
@@ -310,7 +133,7 @@ class ObjectGeometry:
             idx = np.flatnonzero(lower[:, i] < best_d)
             if idx.size == 0:
                 continue
-            d, g = _sdf_local(prims[i].type, prims[i].size, (flat[idx] - self._c[i]) @ self._R[i])
+            d, g = sdf_local(prims[i].type, prims[i].size, (flat[idx] - self._c[i]) @ self._R[i])
             better = d < best_d[idx]
             sel = idx[better]
             best_d[sel] = d[better]
@@ -459,198 +282,6 @@ def _centred(prims: list[Primitive]) -> tuple[tuple[Primitive, ...], float]:
 
 
 _Y90 = (0.0, math.pi / 2, 0.0)  # turns a primitive's z axis onto the object's x axis
-_X90 = (math.pi / 2, 0.0, 0.0)  # turns a primitive's z axis onto the object's -y axis
-
-
-# -- YCB-style compositions --------------------------------------------------------------------
-# Each returns (primitives, description). Dimensions in metres. They approximate the items'
-# shapes at the level a grasp needs (graspable widths, heights, loops, handles); the catalogue
-# (``dexcanvas_core.taxonomy.objects``) documents where its bounding boxes come from.
-
-
-def _mayonnaise() -> tuple[list[Primitive], str]:
-    body_h, cap_h = 0.160, 0.034
-    half_w, r = 0.0195, 0.031  # stadium cross-section 101 × 62 mm
-    prims = [
-        Primitive("box", (half_w, r, body_h / 2), (0, 0, body_h / 2), name="body"),
-        Primitive("cylinder", (r, body_h / 2), (-half_w, 0, body_h / 2), name="body_side_a"),
-        Primitive("cylinder", (r, body_h / 2), (half_w, 0, body_h / 2), name="body_side_b"),
-        Primitive("cylinder", (0.018, cap_h / 2), (0, 0, body_h + cap_h / 2), name="cap"),
-    ]
-    return prims, (
-        "squeeze bottle standing on its base: a stadium-section body 101 × 62 × 160 mm (a box "
-        "between two cylinders of radius 31 mm) and a cap of Ø 36 × 34 mm; total 101 × 62 × "
-        "194 mm, the catalogue's estimated box (the DexRobot collision mesh's)"
-    )
-
-
-def _banana() -> tuple[list[Primitive], str]:
-    r = 0.018
-    mid_h = 0.045  # half length of the middle segment's cylinder
-    end_h = 0.025  # half length of each end segment's cylinder
-    tilt = math.radians(28)
-    prims = [Primitive("capsule", (r, mid_h), (0, 0, 0), _Y90, name="middle")]
-    for side in (-1.0, 1.0):
-        # end segments continue from the middle segment's ends, bending towards +y
-        cx = side * (mid_h + end_h * math.cos(tilt))
-        cy = end_h * math.sin(tilt)
-        # rotation: z → (side·cos(tilt), sin(tilt), 0), a rotation about z after the Y90 turn
-        ang = side * tilt
-        Rz = aa_to_matrix(np.array([0.0, 0.0, ang]))
-        R = Rz @ aa_to_matrix(np.array(_Y90))
-        prims.append(
-            Primitive("capsule", (r, end_h), (cx, cy, 0.0), tuple(matrix_to_aa(R)), name="end")
-        )
-    return prims, (
-        "banana lying on its side: three capsules of radius 18 mm (a middle segment of 90 mm and "
-        "two 50 mm end segments bent 28° towards +y); about 215 × 70 × 36 mm. The catalogue's "
-        "box (95 × 69 × 220 mm) comes from a collision mesh with marker mounts; the banana "
-        "itself is ~36 mm thick (YCB 011_banana)"
-    )
-
-
-def _bowl() -> tuple[list[Primitive], str]:
-    n = 16
-    r_top, r_bot, h, wall = 0.0845, 0.042, 0.071, 0.005
-    slant = math.atan2(r_top - r_bot, h)
-    length = math.hypot(r_top - r_bot, h)
-    width = 2 * r_top * math.sin(math.pi / n) + 0.004
-    prims = [Primitive("cylinder", (r_bot + 0.004, wall / 2), (0, 0, wall / 2), name="bottom")]
-    for k in range(n):
-        phi = 2 * math.pi * k / n
-        # box frame: z along the slanted wall, x radial (wall thickness), y tangential
-        Rz = aa_to_matrix(np.array([0.0, 0.0, phi]))
-        Ry = aa_to_matrix(np.array([0.0, slant, 0.0]))
-        R = Rz @ Ry
-        rm = 0.5 * (r_top + r_bot) - 0.5 * wall * math.cos(slant)
-        prims.append(
-            Primitive(
-                "box",
-                (wall / 2, width / 2, length / 2),
-                (rm * math.cos(phi), rm * math.sin(phi), h / 2),
-                tuple(matrix_to_aa(R)),
-                name="wall",
-            )
-        )
-    return prims, (
-        "bowl standing upright: a 5 mm wall of 16 slanted boxes from Ø 84 mm at the base to "
-        "Ø 169 mm at the rim, 71 mm high, on a 5 mm base disc (YCB 024_bowl proportions, the "
-        "catalogue's estimated box, the DexRobot collision mesh's)"
-    )
-
-
-def _clamp() -> tuple[list[Primitive], str]:
-    t = 0.013  # half thickness of the flat-lying clamp
-    prims = [Primitive("box", (0.035, 0.022, t), (0.065, 0.0, 0.0), name="jaws")]
-    for side in (-1.0, 1.0):
-        ang = side * math.radians(10)
-        R = aa_to_matrix(np.array([0.0, 0.0, ang])) @ aa_to_matrix(np.array(_Y90))
-        prims.append(
-            Primitive(
-                "capsule",
-                (t, 0.052),
-                (-0.022, side * 0.024, 0.0),
-                tuple(matrix_to_aa(R)),
-                name="handle",
-            )
-        )
-    return prims, (
-        "spring clamp lying flat: a jaw block 70 × 44 × 26 mm and two handle capsules (radius "
-        "13 mm, 130 mm long) spreading at ±10°; about 185 × 85 × 26 mm (YCB 051_large_clamp "
-        "proportions; the catalogue's 134 × 53 × 185 mm box is a collision mesh's)"
-    )
-
-
-def _pitcher() -> tuple[list[Primitive], str]:
-    R_body, H = 0.054, 0.235
-    prims = [
-        Primitive("cylinder", (R_body, H / 2), (0, 0, H / 2), name="body"),
-        Primitive("capsule", (0.011, 0.055), (R_body + 0.032, 0, 0.14), name="handle"),
-        Primitive("capsule", (0.010, 0.016), (R_body + 0.014, 0, 0.196), _Y90, name="handle_top"),
-        Primitive(
-            "capsule", (0.010, 0.016), (R_body + 0.014, 0, 0.084), _Y90, name="handle_bottom"
-        ),
-    ]
-    return prims, (
-        "pitcher standing upright: a Ø 108 × 235 mm body cylinder and a handle on its far "
-        "side (+x; a vertical capsule of radius 11 mm, 32 mm outside the body, joined by two "
-        "short capsules); YCB 019_pitcher_base proportions"
-    )
-
-
-def _drill() -> tuple[list[Primitive], str]:
-    batt_h = 0.048
-    handle_len = 0.095
-    tilt = math.radians(12)
-    Rh = aa_to_matrix(np.array([0.0, -tilt, 0.0]))
-    hc = np.array([0.0, 0.0, batt_h + handle_len / 2])
-    prims = [
-        Primitive("box", (0.058, 0.0335, batt_h / 2), (0.0, 0, batt_h / 2), name="battery"),
-        Primitive(
-            "box",
-            (0.017, 0.0165, handle_len / 2 + 0.01),
-            tuple(hc),
-            tuple(matrix_to_aa(Rh)),
-            name="handle",
-        ),
-        Primitive("cylinder", (0.031, 0.075), (0.035, 0, 0.166), _Y90, name="body"),
-        Primitive("cylinder", (0.016, 0.015), (0.125, 0, 0.166), _Y90, name="chuck"),
-    ]
-    return prims, (
-        "cordless drill standing on its battery: a battery block 116 × 67 × 48 mm, a handle "
-        "34 × 33 mm in section tilted 12°, a Ø 62 × 150 mm motor body and a Ø 32 × 30 mm chuck "
-        "on top, handle along z; about 190 × 67 × 197 mm (the catalogue's estimated box, the "
-        "DexRobot collision mesh's; YCB 035_power_drill)"
-    )
-
-
-def _scissors() -> tuple[list[Primitive], str]:
-    r = 0.007  # ring tube radius: 14 mm thick, the catalogue's thickness
-    prims: list[Primitive] = [
-        Primitive("box", (0.055, 0.009, 0.003), (0.062, 0.0, 0.0), name="blades"),
-    ]
-
-    def ring(cx: float, cy: float, ax: float, ay: float, n: int, name: str) -> None:
-        # a closed loop of n capsules along an ellipse with semi-axes (ax, ay) (tube centre line)
-        pts = [(cx + ax * math.cos(2 * math.pi * k / n), cy + ay * math.sin(2 * math.pi * k / n))
-               for k in range(n)]  # fmt: skip
-        for k in range(n):
-            (x0, y0), (x1, y1) = pts[k], pts[(k + 1) % n]
-            dx, dy = x1 - x0, y1 - y0
-            L = math.hypot(dx, dy)
-            ang = math.atan2(dy, dx)
-            R = aa_to_matrix(np.array([0.0, 0.0, ang])) @ aa_to_matrix(np.array(_Y90))
-            prims.append(
-                Primitive(
-                    "capsule",
-                    (r, L / 2),
-                    ((x0 + x1) / 2, (y0 + y1) / 2, 0.0),
-                    tuple(matrix_to_aa(R)),
-                    name=name,
-                )
-            )
-
-    ring(-0.045, 0.024, 0.021, 0.018, 10, "thumb_loop")  # hole ≈ 28 × 22 mm
-    ring(-0.050, -0.030, 0.030, 0.019, 12, "finger_loop")  # hole ≈ 46 × 24 mm
-    for y in (0.012, -0.012):
-        prims.append(Primitive("capsule", (0.005, 0.012), (-0.006, y, 0.0), _Y90, name="shank"))
-    return prims, (
-        "scissors lying flat: blades 110 × 18 × 6 mm, a thumb loop (hole ≈ 28 × 22 mm) and a "
-        "finger loop for two fingers (hole ≈ 46 × 24 mm) made of capsules of radius 7 mm "
-        "(14 mm thick, the catalogue's thickness), joined to the pivot by two shank capsules; "
-        "about 190 × 94 × 14 mm (YCB 037_scissors)"
-    )
-
-
-_YCB_BUILDERS: dict[str, Callable[[], tuple[list[Primitive], str]]] = {
-    "mayonnaisebottle": _mayonnaise,
-    "banana": _banana,
-    "bowl": _bowl,
-    "largeclamp": _clamp,
-    "pitcherbase": _pitcher,
-    "powerdrill": _drill,
-    "scissor": _scissors,
-}
 
 
 def _primitive_composition(spec: ObjectSpec) -> tuple[list[Primitive], str]:
@@ -719,7 +350,7 @@ def _build(spec: ObjectSpec) -> ObjectGeometry:
             spec.id, mesh, spec.mass_kg, friction=spec.friction, inertia_diag=spec.inertia_diag
         )
     if spec.source == "ycb":
-        prims, text = _YCB_BUILDERS[spec.id]()
+        prims, text = YCB_BUILDERS[spec.id]()
     else:
         prims, text = _primitive_composition(spec)
     centred, rest_z = _centred(prims)
