@@ -22,13 +22,11 @@ from dexcanvas_core.demos.build import (
     BuildConfig,
     BuildReport,
     DemoRecord,
-    build_builtin,
     build_demos,
-    builtin_pairs,
-    builtin_plan,
     report_path,
     run_build,
 )
+from dexcanvas_core.demos.builtin_set import build_builtin, builtin_pairs, builtin_plan
 from dexcanvas_core.demos.checks import (
     CheckLimits,
     CheckResult,
