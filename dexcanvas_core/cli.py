@@ -80,7 +80,7 @@ def run_validate(cfg: ValidateConfig) -> int:
     from rich.progress import track
 
     from dexcanvas_core.io import open_dataset
-    from dexcanvas_core.io.reader import row_to_trajectory
+    from dexcanvas_core.io.decode import row_to_trajectory
 
     con = Console()
     ds = open_dataset(cfg.path)
