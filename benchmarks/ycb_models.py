@@ -57,7 +57,7 @@ def shape_facts(object_id: str) -> dict:
     inertia = model.body_inertia[b]
     return {
         "box_m": sorted((2 * geom.aabb_half).tolist()),
-        "volume_m3": float(sum(p.volume for p in geom.primitives)),
+        "volume_m3": geom.volume_m3,
         "gyration_m": sorted(np.sqrt(inertia / model.body_mass[b]).tolist()),
         "parts": len(geom.primitives),
         "description": geom.description,

@@ -162,13 +162,6 @@ class ObjectGeometry:
         return 0.5 * (hi - lo)
 
     @property
-    def aabb_center(self) -> np.ndarray:
-        """``(3,)`` centre [m] of the bounding box in the object frame (the origin for the
-        built-in compositions; a mesh keeps its own frame)."""
-        lo, hi = _aabb(self.primitives)
-        return 0.5 * (hi + lo)
-
-    @property
     def is_mesh(self) -> bool:
         """The object is a mesh (convex parts and a signed-distance grid)."""
         return self.sdf_grid is not None
