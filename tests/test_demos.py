@@ -24,7 +24,8 @@ from dexcanvas_core.demos import (
 )
 from dexcanvas_core.demos.checks import lift_grip_ratio
 from dexcanvas_core.demos.geometry import ObjectGeometry, Primitive
-from dexcanvas_core.demos.grasp import GRIP_RATIO_MAX, HOLD_RATIO_MAX, cached_grasp
+from dexcanvas_core.demos.grasp import cached_grasp
+from dexcanvas_core.demos.grasp_problem import GRIP_RATIO_MAX, HOLD_RATIO_MAX
 from dexcanvas_core.demos.hand import DOF_HIGH, DOF_LOW, N_DOF, hand_model
 from dexcanvas_core.errors import UnknownNameError
 from dexcanvas_core.keypoints import MANO21

@@ -43,7 +43,8 @@ from dexcanvas_core.demos.feasibility import (
     spread_pairs,
 )
 from dexcanvas_core.demos.geometry import ObjectGeometry, Primitive, object_geometry
-from dexcanvas_core.demos.grasp import GRASP_SPECS, Grasp, GraspSpec, solve_grasp
+from dexcanvas_core.demos.grasp import Grasp, solve_grasp
+from dexcanvas_core.demos.grasp_specs import GRASP_SPECS, GraspSpec
 from dexcanvas_core.demos.hand import CAPSULES, HandModel, hand_model
 from dexcanvas_core.demos.operators import OPERATORS, Operator, operator
 

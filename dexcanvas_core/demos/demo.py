@@ -17,16 +17,10 @@ from dexcanvas_core.demos.checks import (
     check_trajectory,
 )
 from dexcanvas_core.demos.feasibility import feasibility
+from dexcanvas_core.demos.finger_problems import closing_path, in_hand_error, solve_fingers
 from dexcanvas_core.demos.geometry import object_geometry
-from dexcanvas_core.demos.grasp import (
-    CLOSURE_MAX,
-    Grasp,
-    cached_grasp,
-    closing_path,
-    grasp_badness,
-    in_hand_error,
-    solve_fingers,
-)
+from dexcanvas_core.demos.grasp import Grasp, cached_grasp, grasp_badness
+from dexcanvas_core.demos.grasp_problem import CLOSURE_MAX
 from dexcanvas_core.demos.hand import hand_model
 from dexcanvas_core.demos.motions import (
     FPS,
