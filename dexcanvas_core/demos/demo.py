@@ -23,9 +23,7 @@ from dexcanvas_core.demos.grasp import Grasp, cached_grasp, grasp_badness
 from dexcanvas_core.demos.grasp_problem import CLOSURE_MAX
 from dexcanvas_core.demos.hand import hand_model
 from dexcanvas_core.demos.motions import (
-    FPS,
     ScriptContext,
-    Timeline,
     finger_transfer,
     pick_and_place,
     rolling,
@@ -34,6 +32,7 @@ from dexcanvas_core.demos.motions import (
 )
 from dexcanvas_core.demos.operators import Operator
 from dexcanvas_core.demos.operators import operator as get_operator
+from dexcanvas_core.demos.timeline import FPS, Timeline
 from dexcanvas_core.errors import DexCanvasError, ValidationError
 from dexcanvas_core.rotations import aa_to_matrix, matrix_to_aa
 from dexcanvas_core.taxonomy import Pair

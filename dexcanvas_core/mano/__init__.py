@@ -17,8 +17,6 @@ from dexcanvas_core.mano.layer import (
     NUM_BETAS,
     ManoLayer,
     ManoOutput,
-    mirror_axis_angle,
-    split_full_pose,
 )
 from dexcanvas_core.mano.lbs import mano_lbs
 from dexcanvas_core.mano.model_file import (
@@ -29,6 +27,7 @@ from dexcanvas_core.mano.model_file import (
     read_model_pickle,
     resolve_model_file,
 )
+from dexcanvas_core.mano.pose import mirror_axis_angle, split_full_pose
 from dexcanvas_core.mano.skeleton import (
     BETA0_SCALE_PER_UNIT,
     BONE_NAMES,

@@ -21,7 +21,7 @@ from dexcanvas_core.mocap.calibrate import (
     calibrate_subject,
     nominal_calibration,
 )
-from dexcanvas_core.mocap.fit import AnatomicalPrior, HandFitter, SolverOptions, fit_sequence
+from dexcanvas_core.mocap.fit import AnatomicalPrior, HandFitter, SolverOptions
 from dexcanvas_core.mocap.frames import MocapFrame
 from dexcanvas_core.mocap.gaps import fill_gaps, lowpass
 from dexcanvas_core.mocap.layout import (
@@ -59,6 +59,7 @@ from dexcanvas_core.mocap.readers import (
 )
 from dexcanvas_core.mocap.render import render_markers
 from dexcanvas_core.mocap.rigid import ObjectRegistration, kabsch, register_object
+from dexcanvas_core.mocap.sequence import fit_sequence
 from dexcanvas_core.mocap.stream import MarkerStream, MarkerTruth
 from dexcanvas_core.mocap.writers import write_c3d, write_csv
 

@@ -38,13 +38,14 @@ import torch
 
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.mano.skeleton import BONE_NAMES, HandSkeleton
-from dexcanvas_core.mocap.fit import HandFitter, SolverOptions, _Priors, fit_sequence
+from dexcanvas_core.mocap.fit import HandFitter, SolverOptions, _Priors
 from dexcanvas_core.mocap.layout import (
     HAND_MARKER_NAMES,
     hand_marker_offsets,
     hand_marker_parents,
 )
 from dexcanvas_core.mocap.model import N_PARAMS, HandMarkerModel, NormalEquations
+from dexcanvas_core.mocap.sequence import fit_sequence
 
 log = logging.getLogger(__name__)
 

@@ -10,7 +10,7 @@
    markers get a pose interpolated from their neighbours (slerp) and are flagged; an object that
    never shows 3 markers is an error.
 3. **Hand, pass 1** on the raw markers (palm swaps repaired by rigid registration first), with a
-   provisional hand size from the palm markers' spread: ``fit.fit_sequence`` — wrist from the
+   provisional hand size from the palm markers' spread: ``sequence.fit_sequence`` — wrist from the
    palm markers, key frames fitted from cold starts, every frame warm-started from them.
 4. **Hand marker repair**: in frames with a marker residual above its threshold (``outlier_mm``,
    or 5 σ of that marker's pass-1 residuals if larger), swapping suspect labels pairwise and
@@ -64,13 +64,7 @@ from dexcanvas_core.mocap.calibrate import (
     nominal_calibration,
     palm_scale,
 )
-from dexcanvas_core.mocap.fit import (
-    HandFitter,
-    SolverOptions,
-    fit_sequence,
-    interpolate_params,
-    root_from_markers,
-)
+from dexcanvas_core.mocap.fit import HandFitter, SolverOptions
 from dexcanvas_core.mocap.gaps import fill_gaps, lowpass, runs
 from dexcanvas_core.mocap.layout import (
     DORSUM_MARKERS,
@@ -79,6 +73,7 @@ from dexcanvas_core.mocap.layout import (
     object_marker_positions,
 )
 from dexcanvas_core.mocap.rigid import kabsch, register_object
+from dexcanvas_core.mocap.sequence import fit_sequence, interpolate_params, root_from_markers
 from dexcanvas_core.mocap.stream import MarkerStream
 from dexcanvas_core.rotations import matrix_to_aa, slerp_aa
 from dexcanvas_core.trajectory import HandTrack, ObjectMove, ObjectTrack, Trajectory
