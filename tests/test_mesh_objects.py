@@ -15,12 +15,9 @@ from dexcanvas_core.demos import generate_demo
 from dexcanvas_core.demos.geometry import mesh_object_geometry, object_geometry, object_record
 from dexcanvas_core.errors import UnknownNameError, ValidationError
 from dexcanvas_core.objects.manifest import read_manifest
-from dexcanvas_core.objects.mesh import (
-    SdfGrid,
-    convex_parts,
-    load_object_mesh,
-    mesh_collision,
-)
+from dexcanvas_core.objects.mesh import load_object_mesh, mesh_collision
+from dexcanvas_core.objects.parts import convex_parts
+from dexcanvas_core.objects.sdf import SdfGrid
 from dexcanvas_core.sim.scene import OBJECT_BODY, add_object, add_table
 from dexcanvas_core.taxonomy import (
     OBJECTS,
@@ -418,7 +415,7 @@ def test_retarget_run_with_a_mesh_manifest_records_the_object(meshes, tmp_path):
 def test_inside_test_matches_the_parts_in_blocks(meshes):
     """The grid's inside test (per part, in blocks of points: bounded memory on real models
     with thousands of planes) agrees with testing every part's planes at once."""
-    from dexcanvas_core.objects.mesh import _inside_any
+    from dexcanvas_core.objects.sdf import _inside_any
 
     col = mesh_collision(load_object_mesh(meshes["bowl"]))
     rng = np.random.default_rng(3)

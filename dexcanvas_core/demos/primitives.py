@@ -13,7 +13,7 @@ from typing import Literal
 import numpy as np
 
 from dexcanvas_core.errors import ValidationError
-from dexcanvas_core.objects.mesh import ConvexPart
+from dexcanvas_core.objects.parts import ConvexPart
 from dexcanvas_core.rotations import aa_to_matrix
 
 PrimitiveType = Literal["box", "cylinder", "sphere", "capsule", "mesh"]
