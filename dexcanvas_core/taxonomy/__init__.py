@@ -24,6 +24,13 @@ from dexcanvas_core.taxonomy.manipulation import (
     manipulation_type,
     types_in_group,
 )
+from dexcanvas_core.taxonomy.object_lookup import (
+    clear_objects,
+    custom_objects,
+    heavy_variant,
+    object_spec,
+    use_objects,
+)
 from dexcanvas_core.taxonomy.objects import (
     HEAVY_BASES,
     OBJECTS,
@@ -32,11 +39,6 @@ from dexcanvas_core.taxonomy.objects import (
     ObjectSpec,
     Shape,
     Source,
-    clear_objects,
-    custom_objects,
-    heavy_variant,
-    object_spec,
-    use_objects,
 )
 from dexcanvas_core.taxonomy.pair import Pair
 

@@ -6,7 +6,8 @@ from dataclasses import dataclass
 
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.taxonomy.manipulation import ManipulationType, manipulation_type
-from dexcanvas_core.taxonomy.objects import ObjectSpec, object_spec
+from dexcanvas_core.taxonomy.object_lookup import object_spec
+from dexcanvas_core.taxonomy.objects import ObjectSpec
 
 SEPARATOR = "/"
 _EXAMPLE = "'cube2/tripod'"
