@@ -129,7 +129,10 @@ def _positive_int(text: str) -> int:
 
 def _add_run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hand", required=True, help="robot hand (see `retarget hands`)")
-    p.add_argument("--pair", required=True, help="OBJECT/TYPE, e.g. cube2/tripod")
+    p.add_argument(
+        "--pair", default=None,
+        help="OBJECT/TYPE, e.g. cube2/tripod (with --dataset: optional, the row --index is used)",
+    )  # fmt: skip
     p.add_argument(
         "--dataset",
         type=Path,

@@ -37,12 +37,13 @@ class RunConfig:
 
     hand: str
     """Registered hand name (``retarget hands``)."""
-    pair: str
-    """``object/manipulation_type``, e.g. ``cube2/tripod``."""
+    pair: str | None = None
+    """``object/manipulation_type``, e.g. ``cube2/tripod``; ``None`` with a ``dataset``: its row
+    ``index`` whatever it shows (the row names its object and type)."""
     dataset: Path | None = None
     """DexCanvas-layout Lance dataset; ``None``: the built-in demonstrations."""
     index: int = 0
-    """Which of the dataset's demonstrations of this pair (0-based)."""
+    """Which of the dataset's demonstrations of this pair (0-based); without a pair, which row."""
     out: Path | None = None
     """Output directory; default ``runs/<hand>_<object>_<type>_<index>``."""
     backend: Literal["pinocchio", "mink"] = "pinocchio"
@@ -80,6 +81,9 @@ class RunConfig:
     def output_dir(self) -> Path:
         if self.out is not None:
             return Path(self.out)
+        if self.pair is None:
+            stem = Path(self.dataset).name.removesuffix(".lance") if self.dataset else "builtin"
+            return Path("runs") / f"{self.hand}_{stem}_{self.index}"
         obj, typ = self.pair.split("/", 1)
         return Path("runs") / f"{self.hand}_{obj}_{typ}_{self.index}"
 
@@ -93,12 +97,48 @@ def check_pair(hand, manipulation_type) -> None:
     """
     model = hand.compile()
     finger_actuators = model.nu - 6
+    if manipulation_type is None:  # an imported row of unknown type: nothing to rule out
+        return
     if manipulation_type.group == "in_hand" and finger_actuators < 3:
         raise RetargetError(
             f"hand {hand.name!r} cannot perform {manipulation_type.name!r}: in-hand manipulation "
             f"needs independently driven fingers and {hand.name} has {finger_actuators} finger "
             "actuator(s); pick a dexterous hand (retarget hands)"
         )
+
+
+def load_subject(cfg: RunConfig):
+    """``(trajectory, subject, substituted)`` of a run: the demonstration ``cfg`` names, what it
+    shows (a ``Pair``, or for a row taken without ``pair`` a ``RowSubject``), and the pair whose
+    demonstration stands in for it (``None``: its own).
+
+    Raises:
+        RetargetError: neither ``pair`` nor ``dataset``, or no such demonstration.
+    """
+    from dexcanvas_core.capture import use_dataset_objects
+    from dexcanvas_core.errors import DexCanvasError
+    from dexcanvas_core.loaders.selection import load_row, subject_of
+    from dexcanvas_core.taxonomy import Pair
+
+    if cfg.dataset is not None:  # an imported dataset's objects, before any name is looked up
+        try:
+            use_dataset_objects(cfg.dataset)
+        except DexCanvasError as e:
+            raise RetargetError(str(e)) from e
+    if cfg.pair is None:
+        if cfg.dataset is None:
+            raise RetargetError(
+                "say which demonstration: --pair OBJECT/TYPE (built-in data), or --dataset D "
+                "--index I"
+            )
+        try:
+            traj = load_row(cfg.dataset, cfg.index)
+            return traj, subject_of(traj), None
+        except DexCanvasError as e:
+            raise RetargetError(str(e)) from e
+    pair = Pair.parse(cfg.pair)
+    traj, substituted = _load_demonstration(cfg, pair)
+    return traj, pair, substituted
 
 
 def _load_demonstration(cfg: RunConfig, pair):
@@ -556,7 +596,6 @@ def retarget_config(cfg: RunConfig):
 
 def run_retarget(cfg: RunConfig) -> dict:
     """Retarget, re-simulate and write the outputs; return the metrics dict."""
-    from dexcanvas_core.taxonomy import Pair
     from retarget.hands import get_hand
 
     if cfg.force_scale != 1.0 and not cfg.forces:
@@ -569,12 +608,11 @@ def run_retarget(cfg: RunConfig) -> dict:
             "--human-replay scores the human's forces against a second simulation of them, "
             "for force matching: add --forces (or leave --human-replay out)"
         )
-    pair = Pair.parse(cfg.pair)
     hand = get_hand(cfg.hand)
-    check_pair(hand, pair.manipulation_type)
     # The demonstration first: on first use it is built, and the terminal says so at once;
     # the solver's modules compile their numba kernels on a machine's first import (seconds).
-    traj, substituted = _load_demonstration(cfg, pair)
+    traj, pair, substituted = load_subject(cfg)
+    check_pair(hand, pair.manipulation_type)
     from dexcanvas_core.demos.geometry import object_geometry, object_record
     from retarget.retargeter import Retargeter
     from retarget.validate import Resimulator, ValidateConfig
@@ -643,6 +681,7 @@ def run_retarget(cfg: RunConfig) -> dict:
         "demonstration_of": substituted or str(pair),
         "object": object_record(pair.object.id),
         "approximate_object": bool(geometry.approximate),
+        "table": table.to_dict(),
         "forces": cfg.forces,
         "force_scale": cfg.force_scale if cfg.forces else None,
     }

@@ -245,11 +245,16 @@ def load_demonstration(pair, index: int = 0, dataset=None):
     from dexcanvas_core.io import open_dataset
     from dexcanvas_core.taxonomy import Pair
 
-    pair = pair if isinstance(pair, Pair) else Pair.parse(pair)
     if dataset is None:
         from dexcanvas_core.builtin import builtin_demonstration_path
 
+        pair = pair if isinstance(pair, Pair) else Pair.parse(pair)
         dataset = builtin_demonstration_path(pair)
+    else:
+        from dexcanvas_core.capture.importer import use_dataset_objects
+
+        use_dataset_objects(dataset)
+        pair = pair if isinstance(pair, Pair) else Pair.parse(pair)
     ds = open_dataset(dataset)
     sel = select_rows(
         ds, objects=[pair.object.id], manipulation_types=[pair.manipulation_type.name]
@@ -261,3 +266,58 @@ def load_demonstration(pair, index: int = 0, dataset=None):
             dataset=str(ds.path),
         )
     return ds.take([int(sel.positions[index])])[0]
+
+
+@dataclass(frozen=True)
+class RowSubject:
+    """What one dataset row shows: its object and, when the taxonomy knows it, its
+    manipulation type (imported captures may carry ``unknown`` or another label).
+
+    ``str()`` gives ``"<object id>/<type name or stored label>"``, like a :class:`Pair`."""
+
+    object: Any
+    """The row's :class:`~dexcanvas_core.taxonomy.ObjectSpec` (``index.scene``)."""
+    manipulation_type: Any
+    """Its :class:`~dexcanvas_core.taxonomy.ManipulationType`, or ``None`` for an unknown label."""
+    label: str = "unknown"
+    """The stored ``gesture`` when the taxonomy does not know it."""
+
+    def __str__(self) -> str:
+        t = self.manipulation_type.name if self.manipulation_type is not None else self.label
+        return f"{self.object.id}/{t or 'unknown'}"
+
+
+def subject_of(traj) -> RowSubject:
+    """The :class:`RowSubject` of a trajectory (its ``scene`` and ``gesture``).
+
+    Raises:
+        UnknownNameError: the row's object is not in the catalogue nor in the objects given by
+            a manifest (the message says how to give it).
+    """
+    obj = object_spec(traj.scene or traj.object.name)
+    try:
+        mtype = manipulation_type(traj.gesture) if traj.gesture else None
+    except (UnknownNameError, ValidationError):
+        mtype = None
+    return RowSubject(obj, mtype, str(traj.gesture or "unknown"))
+
+
+def load_row(dataset, index: int = 0):
+    """Row ``index`` (0-based, dataset order) of ``dataset``, with the objects of an imported
+    dataset put in use (``dexcanvas_core.capture.use_dataset_objects``).
+
+    Raises:
+        DatasetError: no such row (the message gives the row count).
+    """
+    from dexcanvas_core.capture.importer import use_dataset_objects
+    from dexcanvas_core.io import open_dataset
+
+    use_dataset_objects(dataset)
+    ds = open_dataset(dataset)
+    n = len(ds)
+    if isinstance(index, bool) or not isinstance(index, int | np.integer) or not 0 <= index < n:
+        raise DatasetError(
+            f"--index {index!r} out of range: the dataset has {n} row(s) (0..{n - 1})",
+            dataset=str(ds.path),
+        )
+    return ds.take([int(index)])[0]

@@ -29,6 +29,12 @@ _MANO_HANDS_MEAN_RIGHT = np.array(
 )  # fmt: skip
 
 
+MANO_HANDS_MEAN_RIGHT = _MANO_HANDS_MEAN_RIGHT
+"""(45,) [rad] MANO's mean finger pose of the right hand (``hands_mean``), joint order of
+``hand_pose``; the left hand's is its mirror (:func:`mirror_axis_angle`)."""
+_MANO_HANDS_MEAN_RIGHT.setflags(write=False)
+
+
 def mirror_axis_angle(axis_angle: Any) -> Any:
     """Mirror axis-angles across the x = 0 plane: ``(x, y, z) → (x, -y, -z)`` per 3-vector.
 

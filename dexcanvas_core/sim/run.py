@@ -35,7 +35,10 @@ def _atomic_write_text(path: Path, text: str) -> None:
 
 @dataclass(frozen=True)
 class SimulateConfig:
-    pair: str
+    """One ``dexcanvas simulate``: ``pair`` (built-in or ``dataset``), or without a pair the
+    ``dataset``'s row ``index`` (which names its object)."""
+
+    pair: str | None
     out: Path
     dataset: Path | None = None
     index: int = 0
@@ -57,24 +60,31 @@ def run_simulate(cfg: SimulateConfig) -> dict:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
     from dexcanvas_core.io import write_dataset
-    from dexcanvas_core.loaders.selection import load_demonstration
+    from dexcanvas_core.loaders.selection import load_demonstration, load_row, subject_of
 
     out = Path(cfg.out)
     _check_out(out, cfg.overwrite)
     cfg.sim.validate()
-    traj = load_demonstration(cfg.pair, cfg.index, cfg.dataset)
+    if cfg.pair is not None:
+        traj = load_demonstration(cfg.pair, cfg.index, cfg.dataset)
+        label = cfg.pair
+    elif cfg.dataset is not None:
+        traj = load_row(cfg.dataset, cfg.index)
+        label = str(subject_of(traj))
+    else:
+        raise DatasetError("say which demonstration: --pair OBJECT/TYPE, or --dataset D --index I")
     if cfg.progress:
         with Progress(
             "[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
             TimeElapsedColumn(),
         ) as bar:  # fmt: skip
-            task = bar.add_task(f"tracking {cfg.pair} ({cfg.sim.tracker})", total=traj.num_frames)
+            task = bar.add_task(f"tracking {label} ({cfg.sim.tracker})", total=traj.num_frames)
             bar.advance(task)
             res = simulate(traj, cfg.sim, progress=lambda n: bar.advance(task, n))
     else:
         res = simulate(traj, cfg.sim)
     write_dataset([res.trajectory], out, mode="overwrite" if cfg.overwrite else "create")
-    metrics = {**res.metrics, "pair": cfg.pair, "dataset": str(cfg.dataset or "built-in")}
+    metrics = {**res.metrics, "pair": label, "dataset": str(cfg.dataset or "built-in")}
     _atomic_write_text(
         out.with_name(out.name + ".metrics.json"),
         json.dumps(metrics, indent=2, sort_keys=True, default=float),
@@ -84,7 +94,7 @@ def run_simulate(cfg: SimulateConfig) -> dict:
         from dexcanvas_core.sim.plots import plot_finger_forces
 
         try:
-            plot_finger_forces(res, out.with_name(out.name + ".forces.png"), title=cfg.pair)
+            plot_finger_forces(res, out.with_name(out.name + ".forces.png"), title=label)
         except MissingDependencyError as e:  # the data is written; only the picture is missing
             print(f"note: no force plot ({e})")
     if cfg.progress:

@@ -25,6 +25,7 @@ from dexcanvas_core.taxonomy.manipulation import (
     types_in_group,
 )
 from dexcanvas_core.taxonomy.object_lookup import (
+    add_objects_manifest,
     clear_objects,
     custom_objects,
     heavy_variant,
@@ -57,6 +58,7 @@ __all__ = [
     "Shape",
     "Source",
     "Thumb",
+    "add_objects_manifest",
     "clear_objects",
     "custom_objects",
     "heavy_variant",

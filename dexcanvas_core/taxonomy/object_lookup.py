@@ -56,6 +56,11 @@ def object_spec(object_id: str | ObjectSpec) -> ObjectSpec:
     return found
 
 
+def catalogue_spec(name: str) -> ObjectSpec | None:
+    """The catalogue's object of any spelling of ``name`` (manifests aside), or None."""
+    return lookup(_BY_SPELLING, name)
+
+
 # -- objects from meshes: a manifest and an objects directory --------------------------------------
 
 _custom_state: dict = {"key": None, "index": {}}
@@ -91,8 +96,10 @@ def _custom_specs(manifest: str | None, objects_dir: str | None) -> dict[str, Ob
                 mesh=mesh.source,
                 data_source=f"shape: model {f} (objects directory); {spec.data_source}",
             )  # fmt: skip
-    if manifest:
-        for e in read_manifest(manifest):
+    for one in (manifest or "").split(os.pathsep):
+        if not one:
+            continue
+        for e in read_manifest(one):
             base = lookup(_BY_SPELLING, e.id)
             note = f" (objects manifest {e.manifest})"
             if base is None:
@@ -147,6 +154,29 @@ def use_objects(
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
+        raise
+
+
+def add_objects_manifest(manifest: str | os.PathLike) -> dict[str, ObjectSpec]:
+    """Use one more objects manifest, after those in use (its entries win over theirs), e.g.
+    the one written with an imported dataset; a manifest already in use is not added twice.
+
+    Raises:
+        ValidationError: a bad manifest entry (nothing changes then).
+    """
+    path = str(Path(manifest).expanduser().resolve())
+    current = [m for m in (os.environ.get(MANIFEST_ENV) or "").split(os.pathsep) if m]
+    if path in current:
+        return custom_objects()
+    previous = os.environ.get(MANIFEST_ENV)
+    os.environ[MANIFEST_ENV] = os.pathsep.join([*current, path])
+    try:
+        return custom_objects()
+    except Exception:
+        if previous is None:
+            os.environ.pop(MANIFEST_ENV, None)
+        else:
+            os.environ[MANIFEST_ENV] = previous
         raise
 
 
