@@ -150,7 +150,6 @@ def capture_to_trajectory(
     T = cap.num_frames
     oid = object_id or cap.object_name
     move = object_move_range(cap)
-    table = capture_table(cap, kp)
     traj = Trajectory(
         uuid=capture_uuid(cap),
         timestamp=np.arange(T, dtype=np.float64) / cap.fps,
@@ -172,10 +171,11 @@ def capture_to_trajectory(
         cap_machine=CAP_MACHINE,
         is_generated=False,
         object_move=[] if move is None else [ObjectMove(oid, move[0], move[1])],
-        table=table,
     )
     if fps is not None and not math.isclose(fps, cap.fps, rel_tol=1e-6):
         traj = traj.resample(fps)
+    table = capture_table(cap, traj.hand.joint_pos)  # every frame the hand passes through
+    traj.table = table
     report = {
         "name": cap.name,
         "source": cap.source,

@@ -264,22 +264,41 @@ def load_run(run_dir: str | Path) -> RunFiles:
 
 
 def load_human(
-    dataset: str | Path | None, pair: str, *, uuid: str | None = None, index: int = 0
+    dataset: str | Path | None, pair: str | None, *, uuid: str | None = None, index: int = 0
 ) -> Trajectory:
     """The human demonstration of ``pair`` in ``dataset`` (``None`` or ``'built-in'``: the
-    built-in demonstrations), by ``uuid`` when given, else the ``index``-th of the pair."""
+    built-in demonstrations), by ``uuid`` when given, else the ``index``-th of the pair; with a
+    dataset and no pair (or a row of a type the taxonomy does not know), the row ``index``."""
+    from dexcanvas_core.capture import use_dataset_objects
     from dexcanvas_core.io import open_dataset
     from dexcanvas_core.loaders.selection import select_rows
     from dexcanvas_core.taxonomy import Pair
 
-    p = Pair.parse(pair)
-    if dataset is None or str(dataset) == "built-in":
+    builtin = dataset is None or str(dataset) == "built-in"
+    if builtin:
         from dexcanvas_core.builtin import builtin_demonstration_path
 
+        if pair is None:
+            raise VizError("the built-in demonstrations are chosen by pair: give --pair")
+        p = Pair.parse(pair)
         path = builtin_demonstration_path(p)
     else:
         path = Path(dataset)
+        use_dataset_objects(path)
     ds = open_dataset(path)
+    if not builtin and (uuid is not None or pair is None or pair.endswith("/unknown")):
+        sel = select_rows(ds)
+        if uuid is not None:
+            if uuid not in sel.uuids:
+                raise VizError(
+                    f"dataset {str(path)!r} has no demonstration {uuid!r} (the run was made "
+                    "from a different dataset?)"
+                )
+            return ds.take([int(sel.positions[sel.uuids.index(uuid)])])[0]
+        if not 0 <= index < len(sel.positions):
+            raise VizError(f"index {index} out of range: {path} has {len(sel.positions)} rows")
+        return ds.take([int(sel.positions[index])])[0]
+    p = Pair.parse(pair)
     sel = select_rows(ds, objects=[p.object.id], manipulation_types=[p.manipulation_type.name])
     if uuid is not None:
         if uuid not in sel.uuids:
@@ -414,8 +433,13 @@ def record_resimulation(
     from retarget.validate import ValidateConfig
 
     stiff = bool(metrics and metrics.get("forces"))
+    from dexcanvas_core.table import table_of
+
     sim = RecordingResimulator(
-        hand, geometry, ValidateConfig(contact_timeconst=FORCE_CONTACT_TIMECONST if stiff else None)
+        hand,
+        geometry,
+        ValidateConfig(contact_timeconst=FORCE_CONTACT_TIMECONST if stiff else None),
+        table=table_of(human),
     )
     m = sim.model
     group_of_body, part_of_body = robot_body_parts(hand, m)

@@ -33,7 +33,6 @@ from retarget.viz._process import run_process
 from retarget.viz.data import (
     RunFiles,
     SceneData,
-    load_human,
     load_human_for_run,
     load_run,
     record_resimulation,
@@ -87,9 +86,16 @@ class SnapshotConfig:
     progress: bool = True
 
     def validate(self) -> SnapshotConfig:
-        if self.run_dir is None and (self.hand is None or self.pair is None):
-            raise VizError("give --hand and --pair (retarget a demonstration) or --run RUN_DIR")
-        if self.run_dir is not None and (self.hand is not None or self.pair is not None):
+        if self.run_dir is None and (
+            self.hand is None or (self.pair is None and self.dataset is None)
+        ):
+            raise VizError(
+                "give --hand and --pair (or --dataset D --index I) to retarget a demonstration, "
+                "or --run RUN_DIR"
+            )
+        if self.run_dir is not None and (
+            self.hand is not None or self.pair is not None or self.dataset is not None
+        ):
             raise VizError("give either --run RUN_DIR or --hand/--pair, not both")
         if self.frames is not None and self.every is not None:
             raise VizError("give either --frames or --every, not both")
@@ -250,26 +256,23 @@ def _prepare(cfg: SnapshotConfig) -> tuple[RunFiles, object, list[int]]:
         run = load_run(cfg.run_dir)
         human = load_human_for_run(run)
         return run, human, choose_frames(cfg, run.num_frames)
-    from dexcanvas_core.taxonomy import Pair
     from retarget.hands import get_hand
-    from retarget.run import RunConfig, check_pair, run_retarget
+    from retarget.run import RunConfig, check_pair, load_subject, run_retarget
 
-    pair = Pair.parse(cfg.pair)
     hand = get_hand(cfg.hand)
-    check_pair(hand, pair.manipulation_type)
-    human = load_human(cfg.dataset, cfg.pair, index=cfg.index)
-    frames = choose_frames(cfg, human.num_frames)  # before the long part
-    run_retarget(
-        RunConfig(
-            hand=cfg.hand,
-            pair=cfg.pair,
-            dataset=cfg.dataset,
-            index=cfg.index,
-            out=cfg.out,
-            backend=cfg.backend,
-            progress=cfg.progress,
-        )
+    rcfg = RunConfig(
+        hand=cfg.hand,
+        pair=cfg.pair,
+        dataset=cfg.dataset,
+        index=cfg.index,
+        out=cfg.out,
+        backend=cfg.backend,
+        progress=cfg.progress,
     )
+    human, subject, _ = load_subject(rcfg)
+    check_pair(hand, subject.manipulation_type)
+    frames = choose_frames(cfg, human.num_frames)  # before the long part
+    run_retarget(rcfg)
     run = load_run(cfg.out)
     if run.metrics["uuid"] != human.uuid:
         raise VizError(f"run in {cfg.out} is of {run.metrics['uuid']}, expected {human.uuid}")
