@@ -49,7 +49,8 @@ def capture_arrays(seed: int = 0) -> dict:
     keypoints are the built-in skeleton's (a 10 % larger hand) so their bone lengths are known."""
     rng = np.random.default_rng(seed)
     s = np.linspace(0.0, 1.0, T)
-    lift = 0.10 * np.clip((s - 0.5) * 2.0, 0.0, 1.0)
+    u = np.clip((s - 0.3) * 3.0, 0.0, 1.0)
+    lift = 0.10 * (10 * u**3 - 15 * u**4 + 6 * u**5)  # smooth, held at the top from s = 2/3
     obj = np.stack([0.4 + 0 * s, 0.05 + 0 * s, 0.1 + EDGE / 2 + lift], axis=1)
     R_palm_down = aa_to_matrix(np.array([np.pi / 2, 0.0, 0.0]))
     go = np.repeat(matrix_to_aa(R_palm_down)[None], T, axis=0) + 0.05 * rng.normal(size=(T, 3))
