@@ -259,8 +259,10 @@ def _human_forces(traj, pair, prog):
     if not res.success:
         raise RetargetError(
             f"the force pipeline could not reproduce this demonstration with {pair.object.id} "
-            f"(object error > 5 cm at frame {m['failed_at_frame']}), so there are no human forces "
-            "to match; try another --index, or run without --forces"
+            f"(object error > 5 cm at frame {m['failed_at_frame']}"
+            + (f": {m['failure']['reason']}" if m.get("failure") else "")
+            + "), so there are no human forces to match; try another --index, or run without "
+            "--forces (dexcanvas simulate shows why it failed)"
         )
     return res.trajectory, m
 

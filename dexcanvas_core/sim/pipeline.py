@@ -34,6 +34,7 @@ from scipy.spatial.transform import Rotation
 from dexcanvas_core.demos.geometry import ObjectGeometry, object_geometry
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.mano.skeleton import HandSkeleton
+from dexcanvas_core.sim.diagnosis import failure_diagnosis, wrist_rotations
 from dexcanvas_core.sim.forces import contacts_from_frames, finger_force_series
 from dexcanvas_core.sim.hand import FINGER_HINGES, urdf_dof_26
 from dexcanvas_core.sim.reference import (
@@ -274,6 +275,11 @@ def _result(traj, cfg, geometry, ref, scene, env, log, cpu_s) -> SimResult:
         "hinge_clip_max_rad": float(ref.hinge_clip.max()),
         "config": cfg.as_dict(),
     }
+    qpos = np.asarray(log.hand_qpos)
+    metrics["failure"] = failure_diagnosis(
+        env.failed_at, fps, qpos[:, :3], ref.wrist_pos[:T], wrist_rotations(qpos, ref.R_base),
+        np.asarray(log.object_pos), ref.object_pos[:T], touch,
+    )  # fmt: skip
     out = _annotate(traj, cfg, scene, ref, log, wrench, metrics)
     return SimResult(
         trajectory=out,

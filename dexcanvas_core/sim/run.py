@@ -102,6 +102,15 @@ def run_simulate(cfg: SimulateConfig) -> dict:
     return metrics
 
 
+def failure_line(f: dict) -> str:
+    """One line of a rollout's failure diagnosis (``dexcanvas_core.sim.diagnosis``)."""
+    return (
+        f"{f['reason']} at {f['time_s']:.2f} s: wrist {f['wrist_lag_mm']:.0f} mm behind, the "
+        f"object moved {f['slip_mm']:.0f} mm in the hand over 0.3 s, last contact at frame "
+        f"{f['last_contact_frame']}"
+    )
+
+
 def print_summary(m: dict, out: Path) -> None:
     from rich.console import Console
     from rich.table import Table
@@ -112,6 +121,8 @@ def print_summary(m: dict, out: Path) -> None:
     if m["failed_at_frame"] is not None:
         tracked += f" (object error > 5 cm at frame {m['failed_at_frame']})"
     t.add_row("frames tracked", tracked)
+    if m.get("failure"):
+        t.add_row("why it failed", failure_line(m["failure"]))
     t.add_row(
         "object error max / mean",
         f"{100 * m['object_pos_err_max_m']:.2f} / {100 * m['object_pos_err_mean_m']:.2f} cm, "
