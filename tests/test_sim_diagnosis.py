@@ -12,7 +12,7 @@ T = 120
 def _case(kind: str):
     t = np.arange(T) / FPS
     ref_wrist = np.stack([t * 2.0, 0 * t, 0.2 + 0 * t], axis=1)  # carried at 2 m/s
-    ref_obj = ref_wrist + [0.0, 0.0, -0.1]
+    ref_obj = ref_wrist + np.array([0.0, 0.0, -0.1])
     wrist = ref_wrist.copy()
     obj = ref_obj.copy()
     touching = np.ones(T, bool)
