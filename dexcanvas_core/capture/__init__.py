@@ -1,0 +1,1 @@
+"""Captures from other sources turned into DexCanvas trajectories (``dexcanvas import``)."""
