@@ -15,7 +15,7 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from dexcanvas_core.capture.formats import READERS, read_ho3d, read_taco
+from dexcanvas_core.capture.formats import READERS, read_dexycb, read_ho3d, read_taco
 from dexcanvas_core.capture.formats._common import valid_runs
 from dexcanvas_core.capture.formats.ho3d import dexycb_export_rotation
 from dexcanvas_core.capture.up import consensus_up, estimate_up
@@ -426,5 +426,91 @@ def test_read_taco_bad_input(tmp_path):
         read_taco(tmp_path / "r.pkl")
 
 
+# -- dexycb (original release) ----------------------------------------------------------------
+
+
+def write_dexycb(root: Path, pca, *, seq: str = "20200709_141754", tag: bool = True) -> dict:
+    """A DexYCB data folder with one left-hand sequence grasping object id 10 (of 3 on the
+    table), its calibration (betas, extrinsics with the table's AprilTag) and the model."""
+    import yaml
+
+    T = 20
+    go, pose, transl, _ = hand_sequence("left", T, seed=7)
+    pos, rots = object_track(T=T)
+    comps, mean = pca
+    pose_m = np.concatenate([go, (pose - mean) @ np.linalg.inv(comps), transl], axis=1)
+    pose_m[:3] = 0.0  # no hand yet
+    pose_y = np.zeros((T, 3, 7))
+    pose_y[:, :, 3] = 1.0  # the other objects: untracked (identity at the origin)
+    pose_y[:, 1, :4] = Rotation.from_matrix(rots).as_quat()  # x, y, z, w
+    pose_y[:, 1, 4:] = pos
+    folder = root / "20200709-subject-01" / seq
+    folder.mkdir(parents=True)
+    np.savez(folder / "pose.npz", pose_m=pose_m[:, None].astype(np.float32), pose_y=pose_y)
+    meta = {
+        "serials": ["836212060125"],
+        "num_frames": T,
+        "mano_sides": ["left"],
+        "mano_calib": ["20200709-subject-01"],
+        "ycb_ids": [4, 10, 13],
+        "ycb_grasp_ind": 1,
+        "extrinsics": "20200702_151821",
+    }
+    (folder / "meta.yml").write_text(yaml.safe_dump(meta))
+    calib = root / "calibration"
+    (calib / "mano_20200709-subject-01").mkdir(parents=True, exist_ok=True)
+    betas = np.linspace(0.2, -0.2, 10)
+    (calib / "mano_20200709-subject-01" / "mano.yml").write_text(
+        yaml.safe_dump({"betas": betas.tolist()})
+    )
+    align, _ = Rotation.align_vectors([UP], [[0.0, 0.0, 1.0]])
+    tag_pose = np.concatenate([align.as_matrix(), (UP * TABLE)[:, None]], axis=1)
+    ext = {"master": "836212060125", "extrinsics": {"836212060125": np.eye(3, 4).ravel().tolist()}}
+    if tag:
+        ext["extrinsics"]["apriltag"] = tag_pose.ravel().tolist()
+    (calib / "extrinsics_20200702_151821").mkdir(parents=True, exist_ok=True)
+    (calib / "extrinsics_20200702_151821" / "extrinsics.yml").write_text(yaml.safe_dump(ext))
+    write_box(root / "models" / "011_banana" / "textured_simple.obj")
+    return dict(go=go, pose=pose, transl=transl, pos=pos, rots=rots, betas=betas)
+
+
+def test_read_dexycb_synthetic(tmp_path, monkeypatch):
+    monkeypatch.delenv(MANO_MODEL_DIR_ENV, raising=False)
+    pca = fake_mano_pca(tmp_path / "mano", "left")
+    truth = write_dexycb(tmp_path / "data", pca)
+    (d,) = read_dexycb(tmp_path / "data", mano_dir=tmp_path / "mano")
+    k = slice(3, None)
+    assert d["source"].endswith("20200709_141754#3-20") and d["object_name"] == "011_banana"
+    np.testing.assert_allclose(d["global_orient"], truth["go"][k], atol=1e-6)
+    np.testing.assert_allclose(d["hand_pose"], truth["pose"][k], atol=1e-5)
+    np.testing.assert_allclose(d["transl"], truth["transl"][k], atol=1e-6)
+    np.testing.assert_allclose(d["betas"], truth["betas"])
+    np.testing.assert_allclose(d["object_pos"], truth["pos"][k])
+    R = Rotation.from_quat(d["object_quat_wxyz"], scalar_first=True).as_matrix()
+    np.testing.assert_allclose(R, truth["rots"][k], atol=1e-9)
+    assert d["hand_side"] == "left" and d["flat_hand_mean"] is True and d["fps"] == 30.0
+    assert np.allclose(d["up_axis"], UP) and d["table_height"] == pytest.approx(TABLE)
+    assert d["object_mesh"].endswith("011_banana/textured_simple.obj")
+    # estimated from the object instead of the tag: the same plane
+    (e,) = read_dexycb(
+        tmp_path / "data" / "20200709-subject-01", mano_dir=tmp_path / "mano", up=None
+    )
+    assert angle_deg(e["up_axis"], UP) < 0.1 and e["table_height"] == pytest.approx(TABLE)
+
+
+def test_read_dexycb_errors(tmp_path, monkeypatch):
+    monkeypatch.delenv(MANO_MODEL_DIR_ENV, raising=False)
+    pca = fake_mano_pca(tmp_path / "mano", "left")
+    write_dexycb(tmp_path / "data", pca, tag=False)
+    with pytest.raises(ValidationError, match=r"PCA coefficients.*--mano-dir.*MANO_MODEL_DIR"):
+        read_dexycb(tmp_path / "data", up=None)
+    with pytest.raises(ValidationError, match=r"extrinsics\.yml: no 'apriltag' pose"):
+        read_dexycb(tmp_path / "data", mano_dir=tmp_path / "mano")
+    with pytest.raises(ValidationError, match=r"no mesh for object '011_banana'"):
+        read_dexycb(tmp_path / "data", models_dir=tmp_path, mano_dir=tmp_path / "mano", up="z")
+    with pytest.raises(ValidationError, match=r"no DexYCB sequence found"):
+        read_dexycb(tmp_path / "mano")
+
+
 def test_registry():
-    assert READERS["ho3d"] is read_ho3d and READERS["taco"] is read_taco
+    assert READERS == {"ho3d": read_ho3d, "taco": read_taco, "dexycb": read_dexycb}

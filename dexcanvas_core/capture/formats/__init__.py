@@ -22,6 +22,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from dexcanvas_core.capture.formats.dexycb import read_dexycb
 from dexcanvas_core.capture.formats.ho3d import read_ho3d
 from dexcanvas_core.capture.formats.taco import read_taco
 
@@ -30,7 +31,8 @@ Reader = Callable[..., list[dict[str, Any]]]
 READERS: dict[str, Reader] = {
     "ho3d": read_ho3d,
     "taco": read_taco,
+    "dexycb": read_dexycb,
 }
 """Reader of each format name."""
 
-__all__ = ["READERS", "Reader", "read_ho3d", "read_taco"]
+__all__ = ["READERS", "Reader", "read_dexycb", "read_ho3d", "read_taco"]

@@ -17,26 +17,28 @@ rate: 30 fps is assumed; pass ``fps`` when known.
 
 **DexYCB exported to this layout** (``<side>/<subject>/<sequence>/meta/NNNN.pkl``, written by a
 public DexYCB-to-HO-3D exporter from DexYCB's ``pose.npz``). Master-camera frame, OpenCV axes,
-metres; 30 fps (DexYCB's capture rate). Conventions found, with the numbers that show them (499
-left-hand sequences, ``ManoLayer(side="left")`` built-in skeleton):
+metres; 30 fps (DexYCB's capture rate). Conventions found, with the numbers that show them
+(``benchmarks/capture_conventions.py`` on the 499 left-hand sequences; hand checks on every 10th
+sequence with ``ManoLayer(side="left")``'s built-in skeleton):
 
 * ``handPose[3:]`` holds DexYCB's **45 PCA coefficients**, not axis-angles (the exporter copies
   ``pose_m[:, :48]``, which DexYCB poses with ``manopth`` ``use_pca=True, ncomps=45,
   flat_hand_mean=False``): axis-angle = ``hands_mean + c @ hands_components`` of the official
   MANO model, so these files need ``mano_dir`` (or ``$MANO_MODEL_DIR``). Read as axis-angles,
-  the keypoints miss ``handJoints3D`` by 25 mm on average (MCP joints 3–4 mm, fingertips
-  44–66 mm); the coefficients' spread falls from 0.5–0.66 rad (first) to 0.07–0.17 (last), as
-  PCA coefficients do; a zero pose gives MANO's mean pose (4.2 mm from ``handJoints3D``) and
-  not the flat hand (30.7 mm). ``handPose[:3]`` is the global orientation (axis-angle).
+  the keypoints miss ``handJoints3D`` by 23 mm on average (MCP joints 3.7 mm, fingertips
+  48 mm); the coefficients' spread falls from 0.4–0.6 rad (first six) to 0.07–0.17 (last six),
+  as PCA coefficients do; a zero pose gives MANO's mean pose (4.8 mm from ``handJoints3D``),
+  not the flat hand (30.5 mm). ``handPose[:3]`` is the global orientation (axis-angle).
 * ``handTrans`` is MANO's translation: wrist = J0(β) + handTrans, 3.1 mm mean error against
   ``handJoints3D[:, 0]`` (93.5 mm for wrist = handTrans).
-* ``handJoints3D`` is in MANO21 order (25 mm mean error of the unexpanded pose vs 65 mm in the
-  OpenPose order — the order test holds even with the wrong pose space).
+* ``handJoints3D`` is in MANO21 order (23 mm mean error of the unexpanded pose vs 65 mm in the
+  OpenPose order; the exporter reorders ``manopth``'s OpenPose-like output to HO-3D's order).
 * ``objRot`` is **wrong as stored**: the exporter read DexYCB's quaternion ``(x, y, z, w)``
   (scipy order, identity ``[0, 0, 0, 1]``) as ``(w, x, y, z)``; the reader undoes the swap.
-  With the swap undone, the resting poses of the objects of one subject (one camera setup) agree
-  on the table normal within 3.3° (median over 498 sequences), and their lowest points lie on
-  one table plane within 2 mm (median); as stored, the normals scatter by 30° (median).
+  With the swap undone, the up directions estimated per sequence agree with their subject's
+  (one camera setup's) consensus within 3.4° (median over 498 sequences) and the objects'
+  lowest points at the first frame lie on that table plane within 1.9 mm (median; 14 objects
+  start 1–14 cm higher, on other objects); as stored, the estimates scatter by 34° (median).
 * Frames before the hand is annotated hold zeros (``handPose``, ``handTrans``): they are dropped
   (the object track of all frames is still used for the up direction).
 
