@@ -294,7 +294,7 @@ def test_read_ho3d_dexycb_export(tmp_path, monkeypatch):
     with pytest.raises(ValidationError, match="seq3: cannot estimate the up direction"):
         read_ho3d(subject / "seq3", models_dir=tmp_path / "models", mano_dir=tmp_path / "mano")
     d = read_ho3d(
-        subject / "seq3", models_dir=tmp_path / "models", mano_dir=tmp_path / "mano", up=UP
+        subject / "seq3", models_dir=tmp_path / "models", mano_dir=tmp_path / "mano", up_axis=UP
     )[0]
     assert np.allclose(d["up_axis"], UP)
 
@@ -394,7 +394,7 @@ def test_read_taco_synthetic_clip(tmp_path):
     assert d["object_mesh"].endswith("20231104_017.obj")
     assert d["up_axis"] == "z" and d["table_height"] == pytest.approx(TABLE, abs=1e-5)
     # estimated instead of given: the same up
-    (e,) = read_taco(tmp_path / "clips" / "20231104_017.pkl", up=None)
+    (e,) = read_taco(tmp_path / "clips" / "20231104_017.pkl", up_axis=None)
     assert angle_deg(e["up_axis"], np.array([0, 0, 1.0])) < 0.1
 
 
@@ -493,7 +493,7 @@ def test_read_dexycb_synthetic(tmp_path, monkeypatch):
     assert d["object_mesh"].endswith("011_banana/textured_simple.obj")
     # estimated from the object instead of the tag: the same plane
     (e,) = read_dexycb(
-        tmp_path / "data" / "20200709-subject-01", mano_dir=tmp_path / "mano", up=None
+        tmp_path / "data" / "20200709-subject-01", mano_dir=tmp_path / "mano", up_axis=None
     )
     assert angle_deg(e["up_axis"], UP) < 0.1 and e["table_height"] == pytest.approx(TABLE)
 
@@ -503,11 +503,11 @@ def test_read_dexycb_errors(tmp_path, monkeypatch):
     pca = fake_mano_pca(tmp_path / "mano", "left")
     write_dexycb(tmp_path / "data", pca, tag=False)
     with pytest.raises(ValidationError, match=r"PCA coefficients.*--mano-dir.*MANO_MODEL_DIR"):
-        read_dexycb(tmp_path / "data", up=None)
+        read_dexycb(tmp_path / "data", up_axis=None)
     with pytest.raises(ValidationError, match=r"extrinsics\.yml: no 'apriltag' pose"):
         read_dexycb(tmp_path / "data", mano_dir=tmp_path / "mano")
     with pytest.raises(ValidationError, match=r"no mesh for object '011_banana'"):
-        read_dexycb(tmp_path / "data", models_dir=tmp_path, mano_dir=tmp_path / "mano", up="z")
+        read_dexycb(tmp_path / "data", models_dir=tmp_path, mano_dir=tmp_path / "mano", up_axis="z")
     with pytest.raises(ValidationError, match=r"no DexYCB sequence found"):
         read_dexycb(tmp_path / "mano")
 

@@ -193,14 +193,15 @@ def parse_up(up: Any) -> np.ndarray | None:
         axis = name.lstrip("+-")
         if axis not in ("x", "y", "z"):
             raise ValidationError(
-                f"up must be x, y, z (optionally signed) or a 3-vector, got {up!r}", field="up"
+                f"up_axis must be x, y, z (optionally signed) or a 3-vector, got {up!r}",
+                field="up_axis",
             )
         v = np.zeros(3)
         v["xyz".index(axis)] = sign
         return v
     v = np.asarray(up, dtype=np.float64)
     if v.shape != (3,) or not np.isfinite(v).all() or np.linalg.norm(v) < 1e-9:
-        raise ValidationError(f"up must be a non-zero 3-vector, got {up!r}", field="up")
+        raise ValidationError(f"up_axis must be a non-zero 3-vector, got {up!r}", field="up_axis")
     return v / np.linalg.norm(v)
 
 

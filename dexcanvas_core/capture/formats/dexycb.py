@@ -146,7 +146,7 @@ def read_dexycb(
     fps: float | None = None,
     mano_dir: Path | None = None,
     calibration_dir: Path | None = None,
-    up: Any = "tag",
+    up_axis: Any = "tag",
     min_frames: int = 2,
     **opts: Any,
 ) -> list[dict[str, Any]]:
@@ -160,7 +160,7 @@ def read_dexycb(
         mano_dir: folder of the official MANO model files (the PCA basis); default
             ``$MANO_MODEL_DIR``.
         calibration_dir: DexYCB's ``calibration/`` folder; default found above the sequence.
-        up: ``"tag"`` (the table's AprilTag, default), ``None`` (estimated from the object,
+        up_axis: ``"tag"`` (the table's AprilTag, default), ``None`` (estimated from the object,
             shared per subject folder), or an axis name / 3-vector in the world frame.
         min_frames: runs of annotated frames shorter than this are skipped.
 
@@ -176,11 +176,11 @@ def read_dexycb(
     if opts:
         raise ValidationError(
             f"dexycb: unknown option(s) {sorted(opts)}; known: models_dir, fps, mano_dir, "
-            "calibration_dir, up, min_frames",
+            "calibration_dir, up_axis, min_frames",
             field=sorted(opts)[0],
         )
-    use_tag = isinstance(up, str) and up == "tag"
-    given_up = None if use_tag else parse_up(up)
+    use_tag = isinstance(up_axis, str) and up_axis == "tag"
+    given_up = None if use_tag else parse_up(up_axis)
     rows = []
     for seq in _sequence_dirs(Path(path)):
         where = str(seq)

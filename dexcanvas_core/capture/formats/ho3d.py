@@ -258,7 +258,7 @@ def read_ho3d(
     fps: float | None = None,
     layout: str = "auto",
     mano_dir: Path | None = None,
-    up: Any = None,
+    up_axis: Any = None,
     shared_up: bool | None = None,
     min_frames: int = 2,
     **opts: Any,
@@ -275,7 +275,7 @@ def read_ho3d(
             docstring for what differs).
         mano_dir: folder of the official MANO model files, needed by DexYCB exports (PCA
             poses); default ``$MANO_MODEL_DIR``.
-        up: the up direction if known (``"z"``, ``"-y"``, a 3-vector in the source frame); by
+        up_axis: the up direction if known (``"z"``, ``"-y"``, a 3-vector in the source frame); by
             default estimated from the object (see :mod:`dexcanvas_core.capture.up`).
         shared_up: the sequences of one folder share one camera frame, so one consensus up and
             table height (default: ``True`` for DexYCB exports, ``False`` for HO-3D).
@@ -295,12 +295,12 @@ def read_ho3d(
     if opts:
         raise ValidationError(
             f"ho3d: unknown option(s) {sorted(opts)}; known: models_dir, fps, layout, mano_dir, "
-            "up, shared_up, min_frames",
+            "up_axis, shared_up, min_frames",
             field=sorted(opts)[0],
         )
     if layout not in LAYOUTS:
         raise ValidationError(f"ho3d: layout must be one of {LAYOUTS}, got {layout!r}")
-    given_up = parse_up(up)
+    given_up = parse_up(up_axis)
     seqs = [_read_sequence(d, layout, models_dir) for d in _sequence_dirs(Path(path))]
 
     inputs = []

@@ -163,7 +163,7 @@ def read_taco(
     models_dir: Path | None = None,
     fps: float | None = None,
     side: str = "auto",
-    up: Any = "z",
+    up_axis: Any = "z",
     **opts: Any,
 ) -> list[dict[str, Any]]:
     """Read TACO clips (GeneOH-Diffusion release) into mano-npz dicts, one per clip.
@@ -173,7 +173,7 @@ def read_taco(
         models_dir: another folder to look for ``<clip>.obj`` in (default: beside the clip).
         fps: frame rate [Hz]; default 30.
         side: ``"auto"`` (from ``hand_verts``), ``"left"`` or ``"right"``.
-        up: the up direction: ``"z"`` (TACO's world, default), another axis or 3-vector, or
+        up_axis: the up direction: ``"z"`` (TACO's world, default), another axis or 3-vector, or
             ``None`` to estimate it from the object's lift.
 
     Returns:
@@ -188,10 +188,10 @@ def read_taco(
     """
     if opts:
         raise ValidationError(
-            f"taco: unknown option(s) {sorted(opts)}; known: models_dir, fps, side, up",
+            f"taco: unknown option(s) {sorted(opts)}; known: models_dir, fps, side, up_axis",
             field=sorted(opts)[0],
         )
-    given_up = parse_up(up)
+    given_up = parse_up(up_axis)
     out: list[dict[str, Any]] = []
     inputs: list[UpInput] = []
     for f in _files(Path(path)):
