@@ -20,11 +20,9 @@ The files are licence-restricted: this toolkit never ships or downloads them. Po
 
 from __future__ import annotations
 
-import importlib
 import logging
 import os
 import pickle
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -33,6 +31,7 @@ import numpy as np
 
 from dexcanvas_core.errors import DexCanvasError, ValidationError
 from dexcanvas_core.keypoints import MANO_PARENTS
+from dexcanvas_core.safe_pickle import PY2_MODULES, RestrictedUnpickler
 
 logger = logging.getLogger(__name__)
 
@@ -81,49 +80,18 @@ def _chumpy_stand_in(module: str, name: str) -> type[_ChumpyNode]:
     return _CHUMPY_CLASSES[qualified]
 
 
-def _numpy_attr(candidates: tuple[str, ...], name: str) -> Any:
-    """``name`` from the first importable module of ``candidates`` (numpy 2 renamed ``core``)."""
-    for module in candidates:
-        try:
-            return getattr(importlib.import_module(module), name)
-        except (ImportError, AttributeError):
-            continue
-    raise AttributeError(f"none of {candidates} defines {name}")
-
-
-_MULTIARRAY = ("numpy._core.multiarray", "numpy.core.multiarray")
-_NUMERIC = ("numpy._core.numeric", "numpy.core.numeric")
-
-_ALLOWED_GLOBALS: dict[tuple[str, str], Callable[[], Any]] = {
-    ("numpy", "ndarray"): lambda: np.ndarray,
-    ("numpy", "dtype"): lambda: np.dtype,
-    ("numpy.core.multiarray", "_reconstruct"): lambda: _numpy_attr(_MULTIARRAY, "_reconstruct"),
-    ("numpy._core.multiarray", "_reconstruct"): lambda: _numpy_attr(_MULTIARRAY, "_reconstruct"),
-    ("numpy.core.multiarray", "scalar"): lambda: _numpy_attr(_MULTIARRAY, "scalar"),
-    ("numpy._core.multiarray", "scalar"): lambda: _numpy_attr(_MULTIARRAY, "scalar"),
-    ("numpy.core.numeric", "_frombuffer"): lambda: _numpy_attr(_NUMERIC, "_frombuffer"),
-    ("numpy._core.numeric", "_frombuffer"): lambda: _numpy_attr(_NUMERIC, "_frombuffer"),
-    ("copyreg", "_reconstructor"): lambda: importlib.import_module("copyreg")._reconstructor,
-    ("builtins", "object"): lambda: object,
-    ("builtins", "set"): lambda: set,
-    ("builtins", "frozenset"): lambda: frozenset,
-    ("builtins", "slice"): lambda: slice,
-    ("builtins", "complex"): lambda: complex,
-    # Python 3 pickles of bytes at protocol < 3 (numpy array buffers) go through _codecs.encode.
-    ("_codecs", "encode"): lambda: importlib.import_module("_codecs").encode,
-}
-
-# Python 2 module names found in the released (Python 2) pickles.
-_PY2_MODULES = {"copy_reg": "copyreg", "__builtin__": "builtins"}
-
 _SPARSE_CLASSES = {"csc_matrix", "csr_matrix", "coo_matrix", "csc_array", "csr_array", "coo_array"}
 
 
-class _MANOUnpickler(pickle.Unpickler):
-    """Unpickler that admits only what a MANO model file needs (see the module docstring)."""
+class _MANOUnpickler(RestrictedUnpickler):
+    """Unpickler that admits only what a MANO model file needs (see the module docstring): the
+    numpy and builtin globals of :class:`~dexcanvas_core.safe_pickle.RestrictedUnpickler`, chumpy
+    stand-ins and scipy sparse matrices."""
+
+    what = "a MANO model file"
 
     def find_class(self, module: str, name: str) -> Any:
-        module = _PY2_MODULES.get(module, module)
+        module = PY2_MODULES.get(module, module)
         if module == "chumpy" or module.startswith("chumpy."):
             return _chumpy_stand_in(module, name)
         if (module == "scipy.sparse" or module.startswith("scipy.sparse.")) and (
@@ -132,12 +100,7 @@ class _MANOUnpickler(pickle.Unpickler):
             import scipy.sparse  # the per-format modules (scipy.sparse.csc) are deprecated
 
             return getattr(scipy.sparse, name)
-        factory = _ALLOWED_GLOBALS.get((module, name))
-        if factory is None:
-            raise pickle.UnpicklingError(
-                f"refusing to load global {module}.{name}: not expected in a MANO model file"
-            )
-        return factory()
+        return super().find_class(module, name)
 
 
 def _evaluate(value: Any, key: str) -> Any:
