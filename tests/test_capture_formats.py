@@ -19,8 +19,8 @@ from dexcanvas_core.capture.formats import READERS, read_dexycb, read_ho3d, read
 from dexcanvas_core.capture.formats._common import valid_runs
 from dexcanvas_core.capture.formats.ho3d import dexycb_export_rotation
 from dexcanvas_core.capture.up import consensus_up, estimate_up
-from dexcanvas_core.errors import ValidationError
-from dexcanvas_core.keypoints import FINGERS
+from dexcanvas_core.errors import UnknownNameError, ValidationError
+from dexcanvas_core.keypoints import FINGERS, convert_keypoints
 from dexcanvas_core.mano import MANO_MODEL_DIR_ENV, MANO_TIP_VERTEX_IDS, ManoLayer
 from dexcanvas_core.safe_pickle import load_pickle
 
@@ -247,7 +247,8 @@ def test_read_ho3d_synthetic_sequence(tmp_path):
     np.testing.assert_allclose(d["global_orient"], truth["go"][k], atol=1e-6)
     np.testing.assert_allclose(d["hand_pose"], truth["pose"][k], atol=1e-6)
     np.testing.assert_allclose(d["transl"], truth["transl"][k], atol=1e-6)
-    np.testing.assert_allclose(d["keypoints"], truth["kp"][k])
+    np.testing.assert_allclose(d["keypoints"], convert_keypoints(truth["kp"][k], "mano21",
+                                                                 "openpose21"))  # fmt: skip
     np.testing.assert_allclose(d["betas"], truth["betas"], atol=1e-6)
     np.testing.assert_allclose(d["object_pos"], truth["pos"][k])
     q = Rotation.from_quat(d["object_quat_wxyz"], scalar_first=True)
@@ -259,7 +260,9 @@ def test_read_ho3d_synthetic_sequence(tmp_path):
     fk = ManoLayer(side="right").forward_numpy(
         global_orient=d["global_orient"], hand_pose=d["hand_pose"], transl=d["transl"]
     )
-    np.testing.assert_allclose(fk.keypoints, d["keypoints"], atol=1e-6)  # float32 pose
+    np.testing.assert_allclose(
+        fk.keypoints, convert_keypoints(d["keypoints"], "openpose21", "mano21"), atol=1e-6
+    )  # float32 pose
 
 
 def test_read_ho3d_dexycb_export(tmp_path, monkeypatch):
@@ -299,13 +302,24 @@ def test_read_ho3d_dexycb_export(tmp_path, monkeypatch):
     assert np.allclose(d["up_axis"], UP)
 
 
-def test_read_ho3d_pca_needs_mano(tmp_path, monkeypatch):
+def test_read_ho3d_pca_without_mano_fits_the_pose(tmp_path, monkeypatch, caplog):
+    """Without the MANO model that expands PCA poses, the reader gives the joints alone (and
+    says so) and the import fits a pose that reproduces them."""
+    from dexcanvas_core.capture import capture_from_arrays
+
     monkeypatch.delenv(MANO_MODEL_DIR_ENV, raising=False)
     pca = fake_mano_pca(tmp_path / "mano", "left")
-    write_ho3d_sequence(tmp_path / "s", side="left", export=True, pca=pca)
+    truth = write_ho3d_sequence(tmp_path / "s", side="left", export=True, pca=pca)
     write_box(tmp_path / "models" / "010_box.obj")
-    with pytest.raises(ValidationError, match=r"PCA coefficients.*--mano-dir.*MANO_MODEL_DIR"):
-        read_ho3d(tmp_path / "s", models_dir=tmp_path / "models")
+    with caplog.at_level("WARNING"):
+        (d,) = read_ho3d(tmp_path / "s", models_dir=tmp_path / "models")
+    assert "PCA coefficients" in caplog.text and "MANO_MODEL_DIR" in caplog.text
+    assert "hand_pose" not in d and "global_orient" not in d and "transl" not in d
+    cap = capture_from_arrays(d, name="s", mirror_left=True)
+    assert cap.pose_fit_mm < 2.0
+    # the fitted right hand is the mirror of the captured left one: same joints, x negated
+    kp = convert_keypoints(d["keypoints"], "openpose21", "mano21")
+    assert np.allclose(truth["kp"][2:], kp)
 
 
 def test_read_ho3d_bad_input(tmp_path):
@@ -513,4 +527,13 @@ def test_read_dexycb_errors(tmp_path, monkeypatch):
 
 
 def test_registry():
-    assert READERS == {"ho3d": read_ho3d, "taco": read_taco, "dexycb": read_dexycb}
+    from dexcanvas_core.capture.formats import read_mano_npz, reader_for, sequence_name
+
+    assert READERS == {
+        "mano-npz": read_mano_npz, "ho3d": read_ho3d, "taco": read_taco, "dexycb": read_dexycb
+    }  # fmt: skip
+    assert reader_for("MANO_NPZ") is read_mano_npz
+    with pytest.raises(UnknownNameError, match="did you mean 'taco'"):
+        reader_for("tako")
+    assert sequence_name("ho3d:/d/left/subj/seq1#2-24", "x") == "subj_seq1_2-24"
+    assert sequence_name("taco:/d/source_data/20231104_017.pkl", "x") == "source_data_20231104_017"

@@ -15,7 +15,9 @@ every import. Keys (``T`` frames):
   translation (wrist = J0(betas) + transl).
 * ``betas`` (10,), optional: MANO shape.
 * ``keypoints`` (T, 21, 3), optional, OpenPose/MediaPipe order (wrist, then thumb, index, middle,
-  ring, pinky, base to tip) [m]: the subject's bone lengths are measured from them.
+  ring, pinky, base to tip) [m]: the subject's bone lengths are measured from them. A sequence
+  with keypoints and no ``global_orient``/``hand_pose`` gets a pose fitted to its keypoints
+  (``dexcanvas_core.capture.fit``).
 * ``object_name`` (): the object's id (a catalogue id or any name; letters, digits, ``_.-``).
 * ``object_pos`` (T, 3) [m] and ``object_quat_wxyz`` (T, 4): the object frame in the world.
 * ``object_mesh`` (): the object's mesh in that frame, a path relative to the file (OBJ, STL,
@@ -98,6 +100,8 @@ class Capture:
         mirrored: True when a left hand was mirrored to a right one.
         up: the file's up direction (unit 3-vector in its own frame) that became +z.
         ignored_keys: keys of the file this toolkit does not read.
+        pose_fit_mm: when the sequence gave keypoints but no pose, the mean keypoint distance
+            [mm] of the pose fitted to them (``dexcanvas_core.capture.fit``); else None.
     """
 
     name: str
@@ -121,6 +125,7 @@ class Capture:
     mirrored: bool = False
     up: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
     ignored_keys: tuple[str, ...] = ()
+    pose_fit_mm: float | None = None
 
     @property
     def num_frames(self) -> int:
@@ -318,11 +323,19 @@ def capture_from_arrays(
             side; the message names the key and the fix.
     """
     where = where or name
+    fitted = None
+    if "global_orient" not in arrays and "hand_pose" not in arrays and "keypoints" in arrays:
+        arrays, fitted = _pose_from_keypoints(arrays, where)
     missing = [k for k in REQUIRED if k not in arrays]
     if missing:
+        hint = (
+            "; or give only keypoints and the pose is fitted to them"
+            if {"global_orient", "hand_pose"} & set(missing)
+            else ""
+        )
         raise ValidationError(
             f"{where}: missing key(s) {', '.join(missing)} (the mano-npz keys are documented in "
-            "the README and dexcanvas_core.capture.arrays)",
+            f"the README and dexcanvas_core.capture.arrays){hint}",
             field=missing[0],
         )
     fps = _scalar(arrays, "fps", where)
@@ -476,10 +489,41 @@ def capture_from_arrays(
         manipulation_type=mtype or "unknown",
         up=up_v,
         ignored_keys=tuple(sorted(str(k) for k in arrays if k not in KEYS)),
+        pose_fit_mm=fitted,
     )
     if side == "left":
         cap = mirror_capture(cap)
     return to_z_up(cap, where)
+
+
+def _pose_from_keypoints(arrays: Mapping[str, Any], where: str) -> tuple[dict, float]:
+    """``arrays`` with ``global_orient``, ``hand_pose`` and ``wrist_pos`` fitted to its
+    ``keypoints`` (a left hand's are mirrored for the fit and the result mirrored back), and the
+    fit's mean keypoint distance [mm]."""
+    from dexcanvas_core.capture.fit import fit_pose_to_keypoints
+    from dexcanvas_core.keypoints import convert_keypoints
+
+    kp = _array(arrays, "keypoints", (None, 21, 3), where)
+    _check_units("keypoints", kp, where)
+    if "wrist_pos" in arrays or "transl" in arrays:
+        raise ValidationError(
+            f"{where}: wrist_pos/transl without global_orient and hand_pose; give the whole "
+            "pose, or only keypoints (the pose is then fitted to them)",
+            field="global_orient",
+        )
+    side = _string(arrays, "hand_side", where).lower() if "hand_side" in arrays else "right"
+    sign = np.array([-1.0, 1.0, 1.0]) if side == "left" else np.ones(3)
+    mano = convert_keypoints(kp, "openpose21", "mano21") * sign
+    fit = fit_pose_to_keypoints(mano)
+    out = dict(arrays)
+    if side == "left":
+        out["global_orient"] = mirror_axis_angle(fit["global_orient"])
+        out["hand_pose"] = mirror_axis_angle(fit["hand_pose"])
+    else:
+        out["global_orient"], out["hand_pose"] = fit["global_orient"], fit["hand_pose"]
+    out["wrist_pos"] = fit["wrist_pos"] * sign
+    out["flat_hand_mean"] = np.bool_(True)
+    return out, float(np.mean(fit["residual_mm"]))
 
 
 def mirror_capture(cap: Capture) -> Capture:

@@ -187,6 +187,7 @@ def capture_to_trajectory(
         "mirrored": cap.mirrored,
         "up": [round(float(v), 4) for v in cap.up],
         "keypoint_fit_mm": keypoint_fit_mm(cap, kp),
+        "pose_fitted_to_keypoints": cap.pose_fit_mm is not None,
         "table": None if cap.table_height is None else table.to_dict(),
         "object_move": None if move is None else list(move),
         "ignored_keys": list(cap.ignored_keys),

@@ -136,7 +136,11 @@ def load_object_mesh(path: str | os.PathLike, scale: float = 1.0) -> ObjectMesh:
         )
     if not mesh.is_watertight:
         trimesh.repair.fill_holes(mesh)
-    if not mesh.is_watertight or not mesh.is_volume:
+    if not mesh.is_winding_consistent:
+        trimesh.repair.fix_winding(mesh)
+    # Closed: every edge bounds an even number of faces (two, or four where two parts of a
+    # scanned object touch along an edge), with consistent winding, so the volume is defined.
+    if _open_edge_count(mesh) or not mesh.is_winding_consistent or abs(mesh.volume) <= 0:
         open_edges = _open_edge_count(mesh)
         raise ValidationError(
             f"{where}: is not a closed surface ({open_edges} open edges), so it has no volume "
@@ -158,9 +162,10 @@ def load_object_mesh(path: str | os.PathLike, scale: float = 1.0) -> ObjectMesh:
 
 
 def _open_edge_count(mesh) -> int:
+    """Edges bounding an odd number of faces (a hole's rim, or a flap)."""
     edges = np.sort(mesh.edges, axis=1)
     _, counts = np.unique(edges, axis=0, return_counts=True)
-    return int((counts == 1).sum())
+    return int((counts % 2 == 1).sum())
 
 
 # -- the cached collision shape -------------------------------------------------------------------

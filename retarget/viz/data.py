@@ -529,12 +529,11 @@ def scene_data(
     """Combine a run, its human demonstration and (for ``robot_source='sim'``) a recorded
     re-simulation (made here when ``sim`` is None) into what the renderers draw."""
     from dexcanvas_core.demos.geometry import object_geometry
-    from dexcanvas_core.taxonomy import Pair
 
     if robot_source not in ("sim", "kinematic"):
         raise VizError(f"robot_source must be 'sim' or 'kinematic', got {robot_source!r}")
     m = run.metrics
-    pair = Pair.parse(m["pair"])
+    object_id = (m.get("object") or {}).get("id") or m["pair"].split("/", 1)[0]
     if hand is None:
         from retarget.hands import get_hand
 
@@ -549,7 +548,7 @@ def scene_data(
             if human is None:
                 raise VizError("showing the re-simulated hand needs the human demonstration")
             sim = record_resimulation(
-                hand, object_geometry(pair.object.id), a["q_command"], human, metrics=m
+                hand, object_geometry(object_id), a["q_command"], human, metrics=m
             )
         qpos = sim.qpos
         robot_contacts = sim.contacts
@@ -561,13 +560,13 @@ def scene_data(
     if human is not None:
         ref_pos, ref_rot = human.object.pos, human.object.rot_aa
         kp = human.hand.joint_pos
-        hc = human_contacts(human, object_geometry(pair.object.id))
+        hc = human_contacts(human, object_geometry(object_id))
     else:
         ref_pos, ref_rot, kp, hc = obj_pos, obj_rot, None, None
     return SceneData(
         hand_name=hand.name,
-        object_id=pair.object.id,
-        pair=str(pair),
+        object_id=object_id,
+        pair=str(m["pair"]),
         fps=float(m["fps"]),
         timestamp=run.timestamp,
         robot_qpos=np.asarray(qpos, dtype=np.float64),

@@ -70,6 +70,7 @@ from dexcanvas_core.capture.formats._common import (
     valid_runs,
 )
 from dexcanvas_core.errors import ValidationError
+from dexcanvas_core.keypoints import convert_keypoints
 from dexcanvas_core.rotations import aa_to_quat_wxyz
 from dexcanvas_core.safe_pickle import load_pickle
 
@@ -284,12 +285,14 @@ def read_ho3d(
     Returns:
         One dict per run of consecutive frames with both hand and object annotations, with
         the mano-npz keys (``hand_pose`` in axis-angle, ``flat_hand_mean=True``, ``transl``,
-        ``keypoints`` in MANO21 order, ``object_mesh`` the model file, ``up_axis`` a unit
-        vector, ``table_height``, ``hand_side``, ``source`` = ``ho3d:<folder>[#a-b]``).
+        ``keypoints`` in OpenPose order, ``object_mesh`` the model file, ``up_axis`` a unit
+        vector, ``table_height``, ``hand_side``, ``source`` = ``ho3d:<folder>[#a-b]``). A DexYCB
+        export without the MANO model for its PCA poses gives keypoints and no pose (the import
+        fits the pose to them).
 
     Raises:
-        ValidationError: a missing key, a wrong shape, NaN, an unknown option, no mesh, PCA
-            poses without the MANO model, or no up direction (an object that never moves,
+        ValidationError: a missing key, a wrong shape, NaN, an unknown option, no mesh, or no
+            up direction (an object that never moves,
             without ``up`` or a shared estimate).
     """
     if opts:
@@ -326,9 +329,16 @@ def read_ho3d(
         fingers = s.pose48[:, 3:]
         if s.layout == "dexycb-export":
             if s.side not in pca:
-                pca[s.side] = load_mano_pca(s.side, mano_dir, where=str(s.folder))
-            comps, mean = pca[s.side]
-            fingers = mean + fingers @ comps
+                try:
+                    pca[s.side] = load_mano_pca(s.side, mano_dir, where=str(s.folder))
+                except ValidationError as e:  # no licensed model: fit the pose to the joints
+                    logger.warning("%s; the hand pose is fitted to handJoints3D instead", e)
+                    pca[s.side] = None
+            if pca[s.side] is None:
+                fingers = None
+            else:
+                comps, mean = pca[s.side]
+                fingers = mean + fingers @ comps
         rate = float(fps) if fps is not None else (DEXYCB_FPS if s.layout != "ho3d" else HO3D_FPS)
         runs = valid_runs(s.hand_ok & s.obj_ok, min_frames)
         if not runs:
@@ -339,15 +349,22 @@ def read_ho3d(
         logger.info("%s: up %s, table %.4f m (%s)", s.folder, np.round(u, 4).tolist(), table, note)
         for a, b in runs:
             whole = (a, b) == (0, len(s.hand_ok))
-            out.append(
-                {
-                    "fps": rate,
+            pose = (
+                {}
+                if fingers is None
+                else {
                     "global_orient": s.pose48[a:b, :3].copy(),
                     "hand_pose": fingers[a:b].copy(),
                     "flat_hand_mean": True,
                     "transl": s.trans[a:b].copy(),
+                }
+            )
+            out.append(
+                {
+                    "fps": rate,
+                    **pose,
                     "betas": s.betas.copy(),
-                    "keypoints": s.joints[a:b].copy(),
+                    "keypoints": convert_keypoints(s.joints[a:b], "mano21", "openpose21"),
                     "object_name": s.object_name,
                     "object_pos": s.obj_pos[a:b].copy(),
                     "object_quat_wxyz": s.obj_quat[a:b].copy(),
