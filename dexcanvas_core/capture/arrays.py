@@ -37,6 +37,7 @@ ignored (and listed in the import report).
 
 from __future__ import annotations
 
+import logging
 import math
 import re
 from collections.abc import Mapping
@@ -54,6 +55,8 @@ from dexcanvas_core.rotations import (
     matrix_to_quat_wxyz,
     quat_wxyz_to_matrix,
 )
+
+log = logging.getLogger(__name__)
 
 KEYS: tuple[str, ...] = (
     "fps", "global_orient", "hand_pose", "flat_hand_mean", "wrist_pos", "transl", "betas",
@@ -594,9 +597,13 @@ TABLE_REST_TOLERANCE_M = 0.03
 
 
 def check_table_height(cap: Capture, where: str) -> None:
-    """The object rests on the table at the first frame: its lowest point must sit at
-    ``table_height`` (within :data:`TABLE_REST_TOLERANCE_M`). Otherwise the up axis or the table
-    height is wrong; the message says which up axes would fit."""
+    """The object rests on the table at the first frame: its lowest point should sit at
+    ``table_height`` (within :data:`TABLE_REST_TOLERANCE_M`).
+
+    An object sunk into the table, or off it where another up axis would put it on it, means the
+    up axis or the table height is wrong: an error naming the axes that fit. An object above the
+    table with no axis fitting better starts on something else (another object): a warning.
+    """
     pts = object_points_world(cap, 0)
     gap = float(pts[:, 2].min() - cap.table_height)
     if abs(gap) <= TABLE_REST_TOLERANCE_M:
@@ -609,6 +616,14 @@ def check_table_height(cap: Capture, where: str) -> None:
         u = up_vector(axis)
         if abs(float((file_pts @ u).min()) - cap.table_height) <= TABLE_REST_TOLERANCE_M:
             fits.append(axis)
+    if gap > 0 and not fits:
+        log.warning(
+            "%s: at frame 0 the object's lowest point is %.3f m above the table: it starts on "
+            "something else",
+            where,
+            gap,
+        )
+        return
     hint = (
         f"; with up_axis {' or '.join(repr(a) for a in fits)} it would rest on it"
         if fits

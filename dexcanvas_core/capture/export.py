@@ -19,7 +19,8 @@ from dexcanvas_core.trajectory import Trajectory
 
 def geometry_mesh(geometry) -> tuple[np.ndarray, np.ndarray]:
     """``(vertices (V, 3) [m], faces (F, 3))`` of an object geometry in its object frame: a mesh
-    object's surface, or a primitive composition's primitives as closed meshes side by side."""
+    object's surface, or the union of a primitive composition's primitives (one closed surface,
+    ``trimesh.boolean.union`` with the ``manifold3d`` engine)."""
     import trimesh
 
     if geometry.visual is not None:
@@ -44,7 +45,7 @@ def geometry_mesh(geometry) -> tuple[np.ndarray, np.ndarray]:
         if p.type != "mesh":
             m.apply_transform(T)
         parts.append(m)
-    mesh = trimesh.util.concatenate(parts)
+    mesh = parts[0] if len(parts) == 1 else trimesh.boolean.union(parts, engine="manifold")
     return np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
 
 
