@@ -58,6 +58,7 @@ writes ``benchmarks/results/real_motion.json`` and the page ``docs/benchmarks/re
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import multiprocessing
@@ -68,6 +69,7 @@ import sys
 import time
 import traceback
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -114,8 +116,8 @@ CAPTURE_SETS = {
     ),
     "taco": (
         "taco",
-        "TACO source data (<sequence>.pkl hand and object tracks with their <sequence>.obj "
-        "object meshes)",
+        "TACO source data (taco2024.github.io: <sequence>.pkl hand and object tracks with "
+        "their <sequence>.obj object meshes)",
     ),
 }
 """``--captures`` sub-directory → (format, what it holds and where it comes from)."""
@@ -281,6 +283,20 @@ def cases_of_dataset(dataset: Path, label: str, extra: dict | None = None) -> li
     return cases
 
 
+def content_digest(paths) -> str:
+    """A digest of the files at ``paths`` (a directory: its files' names, sizes and times), so
+    that a changed capture is imported again."""
+    h = hashlib.sha256()
+    for p in map(Path, paths):
+        if p.is_file():
+            h.update(p.read_bytes())
+        elif p.is_dir():
+            for f in sorted(q for q in p.rglob("*") if q.is_file()):
+                st = f.stat()
+                h.update(f"{f.relative_to(p)}|{st.st_size}|{st.st_mtime_ns}".encode())
+    return h.hexdigest()
+
+
 def import_once(fmt: str, paths: list[Path], out: Path, **options) -> tuple[bool, dict]:
     """Import ``paths`` (format ``fmt``) into ``out`` unless ``out`` already holds exactly that
     import (its stamp ``<out>.import.json`` records the inputs). ``(imported now, stamp)``."""
@@ -290,6 +306,7 @@ def import_once(fmt: str, paths: list[Path], out: Path, **options) -> tuple[bool
     inputs = {
         "format": fmt,
         "paths": [str(p) for p in paths],
+        "content": content_digest(paths),
         **{k: None if v is None else str(v) for k, v in options.items()},
     }
     if out.exists() and stamp.is_file():
@@ -403,7 +420,11 @@ def find_real_captures(
         elif label == "taco":
             paths = sorted(d.glob("*.pkl")) if d.is_dir() else []
         else:
-            paths = select(d, per_object) if d.is_dir() else []
+            try:
+                paths = select(d, per_object) if d.is_dir() else []
+            except Exception as e:
+                notes.append(f"{label}: could not choose sequences ({type(e).__name__}: {e})")
+                continue
         if not paths:
             extra = (
                 f" with one of {', '.join(sorted(DEXYCB_ITEMS.values()))}"
@@ -829,6 +850,8 @@ class Scheduler:
     store: JobStore
     retry_errors: bool = False
     records: dict = field(default_factory=dict)
+    broken: bool = False
+    """A worker process died (the pool is unusable): nothing more is submitted."""
 
     def finished(self, spec: dict) -> dict | None:
         rec = self.store.done(spec["key"], spec["case"]["uuid"], self.retry_errors)
@@ -852,6 +875,7 @@ class Scheduler:
         return {**spec, "human_dataset": mano.get("human_dataset")}
 
     def run(self, mano_jobs, hand_jobs, workers: int, console) -> None:
+        from rich.markup import escape
         from rich.progress import (
             BarColumn,
             MofNCompleteColumn,
@@ -887,33 +911,43 @@ class Scheduler:
                 ) as prog,
             ):
                 task = prog.add_task("jobs", total=total, completed=done0)
-                pending = {pool.submit(run_job, s): s for s in todo_mano}
-                waiting = []
-                for s in todo_hand:
-                    r = self.ready(s)
-                    if r is None:
-                        waiting.append(s)
-                    elif "strict_success" in r:  # recorded without running
-                        prog.advance(task)
-                    else:
-                        pending[pool.submit(run_job, r)] = r
+                pending: dict = {}
+
+                def submit(spec: dict) -> None:
+                    if not self.broken:
+                        try:
+                            pending[pool.submit(run_job, spec)] = spec
+                        except BrokenProcessPool:
+                            self.broken = True
+
+                def release(specs: list[dict]) -> list[dict]:
+                    """Submit the hand jobs that can run; the rest still wait."""
+                    still = []
+                    for s in specs:
+                        r = self.ready(s)
+                        if r is None:
+                            still.append(s)
+                        elif "strict_success" in r:  # recorded without running
+                            prog.advance(task)
+                        else:
+                            submit(r)
+                    return still
+
+                for s in todo_mano:
+                    submit(s)
+                waiting = release(todo_hand)
                 while pending:
                     done, _ = wait(pending, return_when=FIRST_COMPLETED)
                     for fut in done:
-                        spec = pending.pop(fut)
-                        rec = self._result(fut, spec, console)
+                        rec = self._result(fut, pending.pop(fut), console)
                         prog.advance(task)
-                        prog.update(task, description=_describe(rec))
-                        still = []
-                        for s in waiting:
-                            r = self.ready(s)
-                            if r is None:
-                                still.append(s)
-                            elif "strict_success" in r:
-                                prog.advance(task)
-                            else:
-                                pending[pool.submit(run_job, r)] = r
-                        waiting = still
+                        prog.update(task, description=escape(_describe(rec)))
+                    waiting = release(waiting)
+            if self.broken:
+                console.print(
+                    "[red]a worker process died: the jobs it had and those after it did not "
+                    "run; rerun the same command to resume[/red]"
+                )
         finally:
             for k, v in saved.items():
                 if v is None:
@@ -922,9 +956,12 @@ class Scheduler:
                     os.environ[k] = v
 
     def _result(self, fut, spec: dict, console) -> dict:
+        from rich.markup import escape
+
         try:
             rec = fut.result()
         except Exception as e:  # the worker process died: not stored, a rerun retries it
+            self.broken = self.broken or isinstance(e, BrokenProcessPool)
             rec = {
                 "key": spec["key"],
                 "case": spec["case"]["name"],
@@ -936,7 +973,7 @@ class Scheduler:
                 "error": f"worker died: {type(e).__name__}: {e}",
             }
         if rec.get("error"):
-            console.print(f"[red]{rec['key']}: {rec['error']}[/red]")
+            console.print(f"[red]{escape(rec['key'])}: {escape(rec['error'])}[/red]")
         self.records[spec["key"]] = rec
         return rec
 
@@ -1302,7 +1339,10 @@ def resolve_hands(names) -> tuple[list[str], list[str]]:
 
 
 def run_benchmark(cfg: BenchConfig, console=None) -> dict:
+    """Build the cases, run the jobs not finished yet, print the tables, write the JSON and
+    the page; return the JSON document."""
     from rich.console import Console
+    from rich.markup import escape
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from _common import git_commit, versions
@@ -1316,12 +1356,12 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
     hands, five = resolve_hands(cfg.hands) if any(m in cfg.modes for m in MODES) else ([], [])
     found, notes = find_real_captures(cfg.captures, cfg.models, cfg.per_object)
     for n in notes:
-        console.print(f"[yellow]note:[/yellow] {n}")
+        console.print(f"[yellow]note:[/yellow] {escape(n)}")
     cases, more = build_stress_cases(work, cfg.pairs, cfg.originals, console)
     real, more2 = build_real_cases(found, work, cfg.models, cfg.density, console)
     notes += more + more2
     for n in more + more2:
-        console.print(f"[yellow]note:[/yellow] {n}")
+        console.print(f"[yellow]note:[/yellow] {escape(n)}")
     cases = filter_cases(real + cases, cfg.cases, cfg.limit)
     if not cases:
         raise SystemExit("no cases to run (check --cases / --captures)")
