@@ -10,7 +10,9 @@ The built-in demonstrations move slowly (wrist ≤ 0.55 m/s); real wrists carry 
   ``--models DIR``) and ``DIR/taco/`` (format ``taco``). Left hands are mirrored to right ones
   (``mirror_left``). A format whose reader this checkout lacks
   (``dexcanvas_core.capture.formats.READERS``) is skipped, and said so. Each capture is imported
-  (``dexcanvas import``) into its own dataset;
+  (``dexcanvas import``) into its own dataset; an object that neither the capture nor the
+  catalogue gives a mass (e.g. the mustard bottle) gets ``--density`` (500 kg/m³) × its mesh's
+  volume;
 * **stress cases**: built-in pick-and-place demonstrations whose hand holds the object
   (``--pairs``), each turned into fast rigid motions of the held object inserted into its hold
   (``dexcanvas_core.capture.stress``: carry 0.3 m at 1.5 m/s; transport 0.45 m at 2 m/s, 0.7 m
@@ -34,12 +36,12 @@ Measured per run:
   The DexCanvas rule over the whole clip is kept beside it (``success``);
 * **wrist tracking error**: mean over the clip of the re-simulated wrist's distance [mm] and
   largest hinge error [deg] from its command (the open-loop re-simulation's);
-* **object error max** in the window [cm] (refined runs: the refinement's max over the frames it
+* **object error max** in the window [cm] (runs the refinement kept: its max over the frames it
   tracked), **kinematic penetration max** [mm], **ms/frame** (the retargeting loop) and the
   run's **wall time** [s];
 * the MANO pipeline: strict success in the window, and for a failure its frame, phase (before,
   in or after the window) and reason, read from its simulation at the failure's onset (the last
-  frame the object was within 1 cm): **wrist lag** (the simulated wrist ≥ 2 cm behind its command
+  frame the object was within 1 cm): **wrist lag** (the simulated wrist ≥ 2 cm from its command
   in the 0.1 s before), **lost contact** (fewer than two hand parts pressing the object at the
   onset) or **slip** (held and tracked, the object slid away).
 
