@@ -3,7 +3,8 @@
 The page holds each benchmark's headline table and its targets, with the commit, machine and
 command that produced the numbers, read from the JSON files the benchmark scripts write
 (``force_pipeline.py``, ``retarget_speed_quality.py``, ``force_preservation.py``,
-``ycb_models.py``). Run it after a benchmark::
+``ycb_models.py``, ``real_motion.py``), and the real-motion page ``docs/benchmarks/real_motion.md``
+from its JSON. Run it after a benchmark::
 
     python benchmarks/pages.py
 """
@@ -89,6 +90,22 @@ def targets(title: str, r: dict) -> list[str]:
     return out
 
 
+def real_motion(r: dict) -> list[str]:
+    out = targets("Real motion (real captures, fast carries)", {**r, **r["summary"]})
+    return [*out, "", "Per case, hand and mode: [real_motion.md](real_motion.md)."]
+
+
+def write_real_motion_page(r: dict) -> Path:
+    """``docs/benchmarks/real_motion.md`` from the real-motion JSON (``real_motion.py``)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from real_motion import PAGE as REAL_MOTION_PAGE
+    from real_motion import page_markdown
+
+    REAL_MOTION_PAGE.parent.mkdir(parents=True, exist_ok=True)
+    REAL_MOTION_PAGE.write_text(page_markdown(r))
+    return REAL_MOTION_PAGE
+
+
 def main() -> int:
     lines = [
         "# Benchmarks: the current numbers",
@@ -103,11 +120,15 @@ def main() -> int:
         ("force_pipeline", force_pipeline),
         ("retarget_speed_quality", lambda r: targets("Retargeting speed and quality", r)),
         ("force_preservation", lambda r: targets("Force preservation", r)),
+        ("real_motion", real_motion),
     ):
         path = RESULTS / f"{name}.json"
         if path.is_file():
             lines += [*render(json.loads(path.read_text())), ""]
             found += 1
+    if (RESULTS / "real_motion.json").is_file():
+        page = write_real_motion_page(json.loads((RESULTS / "real_motion.json").read_text()))
+        print(f"wrote {page}")
     if (RESULTS / "ycb_models.json").is_file():
         lines += ["## YCB-style items", "", "See [ycb_models.md](ycb_models.md).", ""]
     if not found:
