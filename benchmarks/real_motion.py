@@ -40,10 +40,9 @@ Measured per run:
   tracked), **kinematic penetration max** [mm], **ms/frame** (the retargeting loop) and the
   run's **wall time** [s];
 * the MANO pipeline: strict success in the window, and for a failure its frame, phase (before,
-  in or after the window) and reason, read from its simulation at the failure's onset (the last
-  frame the object was within 1 cm): **wrist lag** (the simulated wrist ≥ 2 cm from its command
-  in the 0.1 s before), **lost contact** (fewer than two hand parts pressing the object at the
-  onset) or **slip** (held and tracked, the object slid away).
+  in or after the window) and the force pipeline's own diagnosis (``failure`` of its metrics,
+  ``dexcanvas_core.sim.diagnosis``: wrist lag, lost contact, slip or knocked, with the wrist lag
+  and slip behind the call).
 
 Jobs run on ``--workers`` spawned processes and are resumable: each finished job's record is
 written atomically to ``--work DIR`` (default ``benchmarks/results/real_motion_work/``), and a
@@ -133,11 +132,6 @@ TARGET_REFINE = 0.70
 TARGET_WRIST_M = 0.005
 
 # MANO failure reasons (module docstring).
-ONSET_M = 0.01
-WRIST_LAG_M = 0.02
-REASON_WINDOW_S = 0.1
-CONTACT_N = 0.05
-MIN_PARTS = 2
 
 THREAD_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
 
@@ -450,6 +444,27 @@ def build_real_cases(found, work: Path, models, density, console) -> tuple[list[
     cases, notes = [], []
     for label, fmt, paths in found:
         n_new = 0
+        if label == "dexycb":  # whole subject folders: their sequences share one camera's up
+            by_subject: dict[Path, list[Path]] = {}
+            for p in paths:
+                by_subject.setdefault(p.parent, []).append(p)
+            for subject, seqs in sorted(by_subject.items()):
+                out = work / label / f"{_slug(subject.name)}.lance"
+                try:
+                    fresh, _ = import_once(
+                        fmt, [subject], out, mirror_left=True, models_dir=models, density=density
+                    )
+                    n_new += fresh
+                    want = [f"{subject.name}_{q.name}" for q in seqs]
+                    cases += [
+                        c
+                        for c in cases_of_dataset(out, label, {})
+                        if any(c.name.split("/", 1)[1].startswith(w) for w in want)
+                    ]
+                except Exception as e:
+                    notes.append(f"{label}: {subject} not imported ({type(e).__name__}: {e})")
+            console.print(f"{label}: {len(paths)} capture(s) ({n_new} folder(s) imported now)")
+            continue
         for p in paths:
             out = work / label / f"{_slug(p.stem if p.is_file() else p.name)}.lance"
             try:
@@ -614,34 +629,14 @@ def retarget_record(m: dict, arrays: dict, case: Case) -> dict:
     return rec
 
 
-def failure_reason(
-    obj_err, wrist_err, parts_touching, failed_at: int, fps: float, window, frames: int
-) -> dict:
-    """Why the force pipeline lost the object at ``failed_at`` (module docstring), from its
-    per-frame object error ``obj_err`` (T,) [m], wrist error from its command ``wrist_err`` (T,)
-    [m] and number of hand parts pressing the object ``parts_touching`` (T,)."""
-    obj_err = np.asarray(obj_err, dtype=np.float64)
-    f = min(int(failed_at), len(obj_err) - 1)
-    calm = np.flatnonzero(obj_err[: f + 1] <= ONSET_M)
-    onset = int(calm[-1]) if calm.size else 0
-    k = max(1, round(REASON_WINDOW_S * fps))
-    lag = float(np.max(np.asarray(wrist_err, dtype=np.float64)[max(0, onset - k) : f + 1]))
-    parts = int(np.asarray(parts_touching)[onset])
+def failure_phase(failed_at: int, window, frames: int) -> str:
+    """Where the failure frame lies relative to the contact window."""
     s, e = window_bounds(window, frames)
-    phase = "before the window" if f < s else ("in the window" if f <= e else "after the window")
-    if lag >= WRIST_LAG_M:
-        reason = "wrist lag"
-    elif parts < MIN_PARTS:
-        reason = "lost contact"
-    else:
-        reason = "slip"
-    return {
-        "reason": reason,
-        "phase": phase,
-        "onset_frame": onset,
-        "wrist_lag_max_m": lag,
-        "parts_touching_at_onset": parts,
-    }
+    return (
+        "before the window"
+        if failed_at < s
+        else ("in the window" if failed_at <= e else "after the window")
+    )
 
 
 def mano_record(m: dict, traj, case: Case) -> dict:
@@ -667,24 +662,15 @@ def mano_record(m: dict, traj, case: Case) -> dict:
         rec["object_err_max_window_m"] = w["max_m"] if rec["strict_success"] else None
         rec["wrist_pos_err_mean_m"] = float(arrays["wrist_err"].mean())
     if failed is not None:
-        if arrays is not None:
-            rec["failure"] = failure_reason(
-                arrays["obj_err"],
-                arrays["wrist_err"],
-                arrays["parts"],
-                failed,
-                case.fps,
-                case.window,
-                case.frames,
-            )
-        else:
-            rec["failure"] = {"reason": f"object error > 5 cm at frame {failed}"}
+        # the force pipeline's own diagnosis (dexcanvas_core.sim.diagnosis)
+        why = m.get("failure") or {"reason": f"object error > 5 cm at frame {failed}"}
+        rec["failure"] = {**why, "phase": failure_phase(failed, case.window, case.frames)}
     return rec
 
 
 def mano_arrays(traj) -> dict:
-    """Per-frame object error, wrist error from its command and hand parts pressing the
-    object, from the force pipeline's annotated row."""
+    """Per-frame object error and wrist error from its command, from the force pipeline's
+    annotated row."""
     sim_pos = np.asarray(traj.extras["sim_object_pos"], dtype=np.float64)
     T = len(sim_pos)
     obj_err = np.linalg.norm(sim_pos - np.asarray(traj.object.pos[:T], dtype=np.float64), axis=1)
@@ -692,8 +678,7 @@ def mano_arrays(traj) -> dict:
     wrist_err = np.linalg.norm(
         np.asarray(h.urdf_dof[:T, :3], np.float64) - np.asarray(h.urdf_dof_target[:T, :3]), axis=1
     )
-    force = np.linalg.norm(traj.contacts.finger_totals()[:T], axis=2)  # (T, 6) [N]
-    return {"obj_err": obj_err, "wrist_err": wrist_err, "parts": (force > CONTACT_N).sum(axis=1)}
+    return {"obj_err": obj_err, "wrist_err": wrist_err}
 
 
 # ------------------------------------------------------------------------------------- jobs

@@ -1,11 +1,13 @@
 """Why a tracking rollout lost the object: wrist lag, slip, lost contact, or a knock.
 
-At the failure frame ``f`` (the first with object error above the failure threshold), the
-0.3 s before it are read back from the rollout's log:
+At the failure frame ``f`` (the first with object error above the failure threshold) the rollout's
+log is read back from the **onset** (the last frame before ``f`` with object error within
+:data:`ONSET_M`) and the 0.3 s before ``f``:
 
 * **wrist lag**: the object stayed where the hand holds it (its pose in the simulated wrist's
-  frame drifted less than :data:`SLIP_M`), but the simulated wrist trails its reference by more
-  than :data:`WRIST_LAG_M`: the hand carried the object, too slowly;
+  frame drifted less than :data:`SLIP_M`), but the simulated wrist trailed its reference by more
+  than :data:`WRIST_LAG_M` between 0.1 s before the onset and ``f``: the hand carried the
+  object, too slowly;
 * **lost contact**: no hand contact during the last :data:`CONTACT_GAP_S` before ``f`` while the
   reference still carries the object: the fingers opened or fell behind;
 * **slip**: the hand touched the object but the object moved in the hand's frame by more than
@@ -24,7 +26,11 @@ import numpy as np
 from dexcanvas_core.rotations import quat_wxyz_to_matrix
 
 WINDOW_S = 0.3
-"""Look-back before the failure frame [s]."""
+"""Look-back before the failure frame [s] (slip)."""
+ONSET_M = 0.01
+"""The failure's onset is the last frame with object error within this [m]."""
+LAG_LOOKBACK_S = 0.1
+"""The wrist lag counts from this long [s] before the onset."""
 WRIST_LAG_M = 0.02
 """A simulated wrist this far behind its reference [m] at the failure lags."""
 SLIP_M = 0.015
@@ -58,8 +64,8 @@ def failure_diagnosis(
         touching: ``(T,)`` bool, a hand part touches the object.
 
     Returns:
-        ``{"reason", "frame", "time_s", "wrist_lag_mm", "slip_mm", "last_contact_frame",
-        "reference_held"}``.
+        ``{"reason", "frame", "time_s", "onset_frame", "wrist_lag_mm", "slip_mm",
+        "last_contact_frame", "reference_held"}``.
     """
     if failed_at is None:
         return None
@@ -67,7 +73,11 @@ def failure_diagnosis(
     f = int(min(failed_at, T - 1))
     w = max(1, round(WINDOW_S * fps))
     f0 = max(0, f - w)
-    lag = float(np.linalg.norm(wrist_sim[f] - wrist_ref[f]))
+    err = np.linalg.norm(object_pos_sim[: f + 1] - object_pos_ref[: f + 1], axis=1)
+    calm = np.flatnonzero(err <= ONSET_M)
+    onset = int(calm[-1]) if calm.size else 0
+    k0 = max(0, onset - max(1, round(LAG_LOOKBACK_S * fps)))
+    lag = float(np.linalg.norm(wrist_sim[k0 : f + 1] - wrist_ref[k0 : f + 1], axis=1).max())
     # The object's position in the simulated wrist's frame: its drift over the window.
     rel = np.einsum("tji,tj->ti", wrist_rot_sim[f0 : f + 1], object_pos_sim[f0 : f + 1]
                     - wrist_sim[f0 : f + 1])  # fmt: skip
@@ -90,6 +100,7 @@ def failure_diagnosis(
         "reason": reason,
         "frame": f,
         "time_s": round(f / fps, 3),
+        "onset_frame": onset,
         "wrist_lag_mm": round(1000 * lag, 1),
         "slip_mm": round(1000 * slip, 1),
         "last_contact_frame": last_contact,
