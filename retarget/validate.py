@@ -35,6 +35,7 @@ from retarget.errors import RetargetError
 from retarget.hands.base import WRIST_JOINTS
 from retarget.scene import OBJECT_BODY, add_object, add_table, check_table
 from retarget.wrist_drive import (
+    SMOOTHING_HZ,
     WRIST_DRIVERS,
     ComputedTorqueWrist,
     WristReference,
@@ -80,9 +81,16 @@ class ValidateConfig:
     """What carries the wrist along its command (:mod:`retarget.wrist_drive`):
     ``computed_torque`` (force-limited, velocity and acceleration fed forward) or ``servo``
     (MuJoCo position servos, the earlier driver)."""
+    wrist_smoothing_hz: float | None = SMOOTHING_HZ
+    """``computed_torque``: the frequency [Hz] its reference halves (motion well below it
+    passes; :meth:`retarget.wrist_drive.WristReference.from_frames`); ``None``: the reference
+    goes through every command."""
 
     def __post_init__(self) -> None:
         check_wrist_driver(self.wrist_driver)
+        hz = self.wrist_smoothing_hz
+        if hz is not None and not (np.isfinite(hz) and hz > 0):
+            raise RetargetError(f"wrist_smoothing_hz must be > 0 or None, got {hz}")
 
 
 @dataclass
@@ -290,7 +298,9 @@ class Resimulator:
         steps = frame_steps(ts, m.opt.timestep)
         wq = np.r_[self.wrist_slide_q, self.wrist_hinge_q]
         wrist = self._wrist_stepper(q[:, wq], steps)
-        hold = (q[0, wq], np.zeros(6), np.zeros(6))
+        # the computed-torque driver's reference starts from rest at (nearly) the first command
+        q_hold = wrist.reference.q[0] if wrist.driver is not None else q[0, wq]
+        hold = (q_hold, np.zeros(6), np.zeros(6))
         for _ in range(round(self.cfg.settle_s / m.opt.timestep)):
             wrist.step(d, *hold)
         wrist.reset_counts()
@@ -380,7 +390,9 @@ class Resimulator:
     def _wrist_stepper(self, q_wrist: np.ndarray, steps: np.ndarray) -> _WristStepper:
         m = self.model
         if self.cfg.wrist_driver == "computed_torque":
-            ref = WristReference.from_frames(q_wrist, steps, m.opt.timestep)
+            ref = WristReference.from_frames(
+                q_wrist, steps, m.opt.timestep, self.cfg.wrist_smoothing_hz
+            )
             driver = ComputedTorqueWrist(m, self.hand.wrist_gains)
         else:
             n = int(steps[-1]) + 1  # the servos take the interpolated commands from ``ctrl``

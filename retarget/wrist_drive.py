@@ -12,13 +12,13 @@ a driver stands in for it. Two are available (``ValidateConfig.wrist_driver``):
         f_arm = M_ww a_ref + K_p (q_ref − q) + K_d (v_ref − v) + c_w
         f_arm ← limits(f_arm);  ctrl = f_arm − g_w
 
-    * ``q_ref, v_ref, a_ref`` — the commanded wrist trajectory: a C² cubic spline through the
-      commanded wrist joints at the data frames (knots at the physics step where each frame
-      ends, hinge angles unwrapped, at rest at the first frame where the settling ends, zero
-      acceleration at the last), sampled at every physics step; ``v_ref`` and ``a_ref`` are
-      the backward and central differences of those samples over one step, the velocity and
-      acceleration MuJoCo's semi-implicit integrator realises, so that a hand following the
-      samples exactly needs exactly this feed-forward.
+    * ``q_ref, v_ref, a_ref`` — the commanded wrist trajectory (:class:`WristReference`): a
+      cubic smoothing spline through the commanded wrist joints at the data frames (each at
+      the physics step where its frame ends), which passes a human wrist's motion and not a
+      single frame's jump (``smoothing_hz``), sampled at every physics step; ``v_ref`` and
+      ``a_ref`` are the backward and central differences of those samples over one step, the
+      velocity and acceleration MuJoCo's semi-implicit integrator realises, so that a hand
+      following the samples exactly needs exactly this feed-forward.
     * ``M_ww`` — the 6 × 6 wrist block of the joint-space inertia (the whole hand as one rigid
       body carried by the wrist, armature included); the fingers' own accelerations are left
       to the feedback.
@@ -61,6 +61,12 @@ from retarget.hands.base import WRIST_JOINTS, WristGains
 
 WRIST_DRIVERS: tuple[str, ...] = ("computed_torque", "servo")
 """The re-simulation's wrist drivers (module docstring); the first is the default."""
+
+SMOOTHING_HZ = 15.0
+"""[Hz] Default frequency that the ``computed_torque`` driver's reference halves
+(:meth:`WristReference.from_frames`): a human wrist's carry (2.5 m/s, 15 m/s²) passes within
+a fraction of a millimetre, while a one-frame jump in retargeted commands (a few millimetres
+out and back) is not fed forward as a 200 N kick."""
 
 
 def check_wrist_driver(name: str) -> str:
@@ -108,10 +114,26 @@ class WristReference:
     a: np.ndarray
 
     @classmethod
-    def from_frames(cls, q_wrist: np.ndarray, steps: np.ndarray, timestep: float) -> WristReference:
+    def from_frames(
+        cls,
+        q_wrist: np.ndarray,
+        steps: np.ndarray,
+        timestep: float,
+        smoothing_hz: float | None = SMOOTHING_HZ,
+    ) -> WristReference:
         """From the commanded wrist joints ``q_wrist`` (T, 6) reached at physics steps
-        ``steps`` (T,) (:func:`frame_steps`): rows for steps 0 … ``steps[-1]``."""
-        from scipy.interpolate import CubicSpline
+        ``steps`` (T,) (:func:`frame_steps`) of ``timestep`` [s]: rows for steps 0 …
+        ``steps[-1]``.
+
+        The samples are those of a cubic smoothing spline through the commands (hinge angles
+        unwrapped), resting at the first command before the first frame and at the last after
+        the last (the commands repeated there, so the settled hand starts from rest), whose
+        roughness weight ``λ = 1 / (h (2π f_c)⁴)`` (``h`` the median frame interval in
+        simulated time, ``f_c = smoothing_hz``) halves a sinusoid of frequency ``f_c`` and
+        passes slower motion nearly unchanged (gain ``1 / (1 + (f / f_c)⁴)``). ``None``: the
+        interpolating spline (through every command).
+        """
+        from scipy.interpolate import make_smoothing_spline
 
         q = np.array(q_wrist, dtype=np.float64)
         q[:, 3:] = np.unwrap(q[:, 3:], axis=0)
@@ -119,14 +141,15 @@ class WristReference:
         if len(q) < 2:
             samples = np.repeat(q[:1], n + 2, axis=0)
         else:
-            spline = CubicSpline(
-                np.asarray(steps, np.float64) * timestep,
-                q,
-                bc_type=((1, np.zeros(q.shape[1])), (2, np.zeros(q.shape[1]))),
-            )
-            samples = np.empty((n + 2, q.shape[1]))
-            samples[0] = q[0]  # one step before the first frame: resting there
-            samples[1:] = spline(np.arange(n + 1) * timestep)
+            x = np.asarray(steps, np.float64) * timestep
+            h = float(np.median(np.diff(x)))
+            # the rest before and after, long enough for the smoothing to settle (2 / f_c)
+            k = 2 + (0 if smoothing_hz is None else int(np.ceil(2.0 / (smoothing_hz * h))))
+            pad = h * np.arange(1, k + 1)
+            xp = np.concatenate([x[0] - pad[::-1], x, x[-1] + pad])
+            qp = np.concatenate([np.repeat(q[:1], k, 0), q, np.repeat(q[-1:], k, 0)])
+            lam = 0.0 if smoothing_hz is None else 1.0 / (h * (2 * np.pi * smoothing_hz) ** 4)
+            samples = make_smoothing_spline(xp, qp, lam=lam)(np.arange(-1, n + 1) * timestep)
         prev, cur = samples[:-1], samples[1:]
         nxt = np.vstack([samples[2:], samples[-1:]])  # after the last frame: held
         return cls(
@@ -140,11 +163,9 @@ class ComputedTorqueWrist:
     """The ``computed_torque`` driver of one compiled re-simulation model (module docstring).
 
     Call :meth:`apply` between ``mj_step1`` and ``mj_step2``. It counts the physics steps it
-    drove and those in which a limit bound, and keeps the largest force and torque it applied
-    since :meth:`reset_peaks`.
+    drove (``steps``) and those in which the force or the torque limit bound
+    (``force_saturated``, ``torque_saturated``).
     """
-
-    name = "computed_torque"
 
     def __init__(self, model: mujoco.MjModel, gains: WristGains):
         m = model
@@ -163,15 +184,7 @@ class ComputedTorqueWrist:
         self.kp = np.array([gains.kp_slide] * 3 + [gains.kp_hinge] * 3, dtype=np.float64)
         self._kd_scale = 2.0 * gains.dampratio * np.sqrt(self.kp)
         self._M = np.zeros((m.nv, m.nv))
-        self.steps = 0
-        self.force_saturated = 0
-        self.torque_saturated = 0
-        self.reset_peaks()
-
-    def reset_peaks(self) -> None:
-        """Start a new interval for :attr:`force_peak` [N] and :attr:`torque_peak` [N·m]."""
-        self.force_peak = 0.0
-        self.torque_peak = 0.0
+        self.reset_counts()
 
     def reset_counts(self) -> None:
         """Forget the step and saturation counts."""
@@ -198,13 +211,8 @@ class ComputedTorqueWrist:
         fn = float(np.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]))
         if fn > self.force_limit:
             f[:3] *= self.force_limit / fn
-            fn = self.force_limit
             self.force_saturated += 1
-        tn = float(np.abs(f[3:]).max())
-        if tn > self.torque_limit:
+        if float(np.abs(f[3:]).max()) > self.torque_limit:
             np.clip(f[3:], -self.torque_limit, self.torque_limit, out=f[3:])
-            tn = self.torque_limit
             self.torque_saturated += 1
-        self.force_peak = max(self.force_peak, fn)
-        self.torque_peak = max(self.torque_peak, tn)
         d.ctrl[self.act] = f - grav
