@@ -128,7 +128,8 @@ class ValidationResult:
     """(T,) [rad] rotation angle between the simulated and the commanded wrist orientation."""
     wrist_force_peak: np.ndarray | None = None
     """(T,) [N] largest norm, over the frame's physics steps, of the force the arm applies to
-    the wrist (its slide joints' actuator forces plus their gravity compensation)."""
+    the wrist (its slide joints' actuator forces plus their gravity compensation); frame 0:
+    the last settling step's."""
     wrist_torque_peak: np.ndarray | None = None
     """(T,) [N·m] the same for the largest of the three hinge torques."""
 
@@ -302,6 +303,7 @@ class Resimulator:
         q_hold = wrist.reference.q[0] if wrist.driver is not None else q[0, wq]
         hold = (q_hold, np.zeros(6), np.zeros(6))
         for _ in range(round(self.cfg.settle_s / m.opt.timestep)):
+            wrist.reset_peaks()  # frame 0 (no steps of its own) gets the settling's last
             wrist.step(d, *hold)
         wrist.reset_counts()
         F = len(self.fingers) + 1
@@ -317,7 +319,8 @@ class Resimulator:
             n_sub = int(steps[t] - steps[t - 1]) if t > 0 else 0
             acc = np.zeros((F, 3))
             n_read = 0
-            wrist.reset_peaks()
+            if n_sub:
+                wrist.reset_peaks()
             for k in range(n_sub):
                 a = (k + 1) / n_sub
                 d.ctrl[:] = ((1 - a) * q[t - 1] + a * q[t])[self.act_q]
