@@ -53,9 +53,16 @@ def servo_summary(m: dict) -> str | None:
     servo = m.get("finger_servo_err_mean_deg")
     if not servo:
         return None
+    sat = [m.get(f"wrist_{k}_saturation_fraction") or 0.0 for k in ("force", "torque")]
+    limits = (
+        f" (at its force / torque limit in {100 * sat[0]:.1f} / {100 * sat[1]:.1f} % of the steps)"
+        if any(sat)
+        else ""
+    )
+    driver = " (servo driver)" if m.get("wrist_driver") == "servo" else ""
     return (
-        f"wrist {1000 * m['wrist_pos_tracking_err_mean_m']:.1f} mm / "
-        f"{m['wrist_rot_tracking_err_mean_deg']:.1f}°; each finger's worst joint: "
+        f"wrist{driver} {1000 * m['wrist_pos_tracking_err_mean_m']:.1f} mm / "
+        f"{m['wrist_rot_tracking_err_mean_deg']:.1f}°{limits}; each finger's worst joint: "
         + ", ".join(f"{k} {v:.1f}°" for k, v in servo.items())
     )
 

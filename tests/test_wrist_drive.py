@@ -13,7 +13,7 @@ from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.trajectory import HandTrack, ObjectTrack, Trajectory
 from retarget.errors import RetargetError
 from retarget.hands import WristGains, get_hand
-from retarget.validate import Resimulator, ValidateConfig
+from retarget.validate import Resimulator, ValidateConfig, servo_summary
 from retarget.wrist_drive import WristReference, frame_steps
 
 FPS = 120.0
@@ -94,9 +94,10 @@ def test_held_wrist_sits_on_target_carrying_the_hands_weight():
 
 
 def test_force_and_torque_limits_hold_against_an_impossible_command():
-    """A 50 m/s² carry with a 20 N arm, then a 0.3 m and 90° jump in one frame: the force the
-    arm applies (measured from the simulation's actuator forces) never exceeds the limits, the
-    metrics say how often they bound, and the hand still arrives where commanded."""
+    """A 50 m/s² carry with a 20 N arm (2 N·m per hinge), then a 0.3 m and 90° jump in one
+    frame: the force the arm applies (measured from the simulation's actuator forces) never
+    exceeds the limits, the metrics and the summary say how often they bound, and the hand
+    still arrives where commanded."""
     weak = dataclasses.replace(
         get_hand("allegro"), wrist_gains=WristGains(force_slide=20.0, torque_hinge=2.0)
     )
@@ -124,6 +125,7 @@ def test_force_and_torque_limits_hold_against_an_impossible_command():
     assert m["wrist_force_max_n"] == pytest.approx(force.max(), rel=1e-12)
     assert 0.0 < m["wrist_force_saturation_fraction"] < 0.5
     assert 0.0 < m["wrist_torque_saturation_fraction"] < 0.5
+    assert "at its force / torque limit in" in servo_summary(m)  # said on the terminal
     assert res.wrist_pos_err[n - 1] > 0.01  # the carry was too fast for 20 N
     assert res.wrist_pos_err[-1] < 1e-3 and np.degrees(res.wrist_rot_err[-1]) < 0.1
 
