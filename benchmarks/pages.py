@@ -3,8 +3,8 @@
 The page holds each benchmark's headline table and its targets, with the commit, machine and
 command that produced the numbers, read from the JSON files the benchmark scripts write
 (``force_pipeline.py``, ``retarget_speed_quality.py``, ``force_preservation.py``,
-``ycb_models.py``, ``real_motion.py``), and the real-motion page ``docs/benchmarks/real_motion.md``
-from its JSON. Run it after a benchmark::
+``ycb_models.py``, ``wrist_tracking.py``, ``real_motion.py``), and the real-motion page
+``docs/benchmarks/real_motion.md`` from its JSON. Run it after a benchmark::
 
     python benchmarks/pages.py
 """
@@ -131,6 +131,8 @@ def main() -> int:
         print(f"wrote {page}")
     if (RESULTS / "ycb_models.json").is_file():
         lines += ["## YCB-style items", "", "See [ycb_models.md](ycb_models.md).", ""]
+    if (RESULTS / "wrist_tracking.json").is_file():
+        lines += ["## Wrist tracking", "", "See [wrist_tracking.md](wrist_tracking.md).", ""]
     if not found:
         print(f"pages: no results in {RESULTS}; run a benchmark first", file=sys.stderr)
         return 2

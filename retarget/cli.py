@@ -160,6 +160,14 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
         help="with --forces: press with X times the human's forces (a grip margin; default 1)",
     )
     p.add_argument(
+        "--time-scale",
+        default=1.0,  # RunConfig.time_scale, which checks the text (one-line errors)
+        metavar="S",
+        help="execute the demonstration S times slower (1 to 10; its timestamps stretched, "
+        "frames unchanged), for arms that cannot follow a human wrist at full speed; "
+        "recorded in metrics.json (default 1)",
+    )
+    p.add_argument(
         "--human-replay",
         action="store_true",
         help="with --forces: simulate the human again with another MPC seed and score its "
@@ -240,6 +248,7 @@ def _plain_run_config(args: argparse.Namespace):
         calibrate_iterations=args.calibrate_iterations,
         force_scale=args.force_scale,
         human_replay=args.human_replay,
+        time_scale=args.time_scale,
         overrides=dict(args.set or ()),
         progress=not args.quiet,
     )

@@ -75,8 +75,17 @@ class RunConfig:
     """``RetargetConfig`` fields changed from their defaults (``--set NAME=VALUE``), e.g.
     ``{"w_contacts": 100.0}``; the run's own options (``backend``, ``forces``, ``force_scale``)
     are set by their fields, not here."""
+    time_scale: float = 1.0
+    """Execute the demonstration this many times slower (1 to ``MAX_TIME_SCALE``): its
+    timestamps are stretched about the first before anything else (force pipeline,
+    retargeting, re-simulation) sees it; frames, poses and contact records are unchanged, the
+    frame rate is divided by it. For arms that cannot follow a human's wrist at full speed;
+    recorded in ``metrics.json`` (``time_scale``) and shown in the summary when not 1."""
     progress: bool = True
     """Show progress bars and the summary on the terminal."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "time_scale", check_time_scale(self.time_scale))
 
     def output_dir(self) -> Path:
         if self.out is not None:
@@ -86,6 +95,40 @@ class RunConfig:
             return Path("runs") / f"{self.hand}_{stem}_{self.index}"
         obj, typ = self.pair.split("/", 1)
         return Path("runs") / f"{self.hand}_{obj}_{typ}_{self.index}"
+
+
+MAX_TIME_SCALE = 10.0
+"""The slowest execution ``RunConfig.time_scale`` allows (a 6 s demonstration in a minute)."""
+
+
+def check_time_scale(scale) -> float:
+    """``scale`` (a number or its text) as a float if it is a finite number from 1 to
+    ``MAX_TIME_SCALE``; else a one-line :class:`RetargetError` saying so."""
+    try:
+        s = float(scale)
+    except (TypeError, ValueError):
+        s = float("nan")
+    if not (np.isfinite(s) and 1.0 <= s <= MAX_TIME_SCALE):
+        raise RetargetError(
+            f"--time-scale must be a finite number from 1 to {MAX_TIME_SCALE:g} (the "
+            f"demonstration is executed that many times slower), got {str(scale)!r}"
+        )
+    return s
+
+
+def time_scaled(traj, scale: float):
+    """``traj`` executed ``scale`` (≥ 1) times slower: timestamps stretched about the first,
+    frame rate divided by ``scale``, everything else (frames, poses, contact records, uuid)
+    unchanged. ``scale`` 1: ``traj`` itself."""
+    import dataclasses
+
+    scale = check_time_scale(scale)
+    if scale == 1.0:
+        return traj
+    t0 = traj.timestamp[0]
+    return dataclasses.replace(
+        traj, timestamp=t0 + scale * (traj.timestamp - t0), fps=traj.fps / scale
+    )
 
 
 def check_pair(hand, manipulation_type) -> None:
@@ -615,6 +658,7 @@ def run_retarget(cfg: RunConfig) -> dict:
     # the solver's modules compile their numba kernels on a machine's first import (seconds).
     traj, pair, substituted = load_subject(cfg)
     check_pair(hand, pair.manipulation_type)
+    traj = time_scaled(traj, cfg.time_scale)
     from dexcanvas_core.demos.geometry import object_geometry, object_record
     from retarget.retargeter import Retargeter
     from retarget.validate import Resimulator, ValidateConfig
@@ -667,6 +711,7 @@ def run_retarget(cfg: RunConfig) -> dict:
         "backend": cfg.backend,
         "frames": traj.num_frames,
         "fps": traj.fps,
+        "time_scale": float(cfg.time_scale),
         **sim.metrics(),
         "keypoint_err_mean_m": float(robot.keypoint_err.mean()),
         "penetration_max_m": kin_pen,
@@ -840,6 +885,12 @@ def _print_summary(m: dict, out_dir: Path) -> None:
 
     ok = "[green]SUCCESS[/green]" if m["success"] else "[red]FAILED[/red]"
     t = Table(title=f"{m['hand']} · {m['pair']} · {ok}", show_header=False)
+    if m.get("time_scale", 1.0) != 1.0:
+        t.add_row(
+            "time scale",
+            f"[yellow]executed {m['time_scale']:g}× slower than demonstrated[/yellow] "
+            f"({m['frames']} frames at {m['fps']:.4g} Hz)",
+        )
     t.add_row(
         "object error max / mean",
         f"{100 * m['object_pos_err_max_m']:.1f} / "

@@ -6,6 +6,12 @@ object pose. Success is the DexCanvas rule: no frame with object position error 
 loose rule of other work (mean error < 10 cm and < 0.5 rad) is reported too, with mean errors,
 per-finger contact forces and the deepest hand–object penetration.
 
+The wrist is driven by ``ValidateConfig.wrist_driver`` (:mod:`retarget.wrist_drive`: by default
+a force-limited computed-torque controller that follows the commanded wrist trajectory with its
+velocity and acceleration fed forward; ``servo``: plain position servos); the finger actuators
+track their commands, linearly interpolated within each frame of
+:func:`retarget.wrist_drive.frame_steps` physics steps.
+
 Contact forces come from ``mj_contactForce`` after each physics step (the contacts and the
 constraint forces of one ``mj_step`` belong to the same forward pass), rotated out of the contact
 frame into the world, signed as the force of the hand on the object, and averaged over the
@@ -28,6 +34,15 @@ from dexcanvas_core.trajectory import Trajectory
 from retarget.errors import RetargetError
 from retarget.hands.base import WRIST_JOINTS
 from retarget.scene import OBJECT_BODY, add_object, add_table, check_table
+from retarget.wrist_drive import (
+    SMOOTHING_HZ,
+    WRIST_DRIVERS,
+    ComputedTorqueWrist,
+    WristReference,
+    check_wrist_driver,
+    frame_steps,
+    use_wrist_motors,
+)
 
 log = logging.getLogger(__name__)
 
@@ -38,9 +53,16 @@ def servo_summary(m: dict) -> str | None:
     servo = m.get("finger_servo_err_mean_deg")
     if not servo:
         return None
+    sat = [m.get(f"wrist_{k}_saturation_fraction") or 0.0 for k in ("force", "torque")]
+    limits = (
+        f" (at its force / torque limit in {100 * sat[0]:.1f} / {100 * sat[1]:.1f} % of the steps)"
+        if any(sat)
+        else ""
+    )
+    driver = " (servo driver)" if m.get("wrist_driver") == "servo" else ""
     return (
-        f"wrist {1000 * m['wrist_pos_tracking_err_mean_m']:.1f} mm / "
-        f"{m['wrist_rot_tracking_err_mean_deg']:.1f}°; each finger's worst joint: "
+        f"wrist{driver} {1000 * m['wrist_pos_tracking_err_mean_m']:.1f} mm / "
+        f"{m['wrist_rot_tracking_err_mean_deg']:.1f}°{limits}; each finger's worst joint: "
         + ", ".join(f"{k} {v:.1f}°" for k, v in servo.items())
     )
 
@@ -62,6 +84,20 @@ class ValidateConfig:
     contact_timeconst: float | None = None
     """Override every contact's ``solref`` time constant [s] (force matching: the force
     pipeline's, ``retarget.run.FORCE_CONTACT_TIMECONST``)."""
+    wrist_driver: str = WRIST_DRIVERS[0]
+    """What carries the wrist along its command (:mod:`retarget.wrist_drive`):
+    ``computed_torque`` (force-limited, velocity and acceleration fed forward) or ``servo``
+    (MuJoCo position servos, the earlier driver)."""
+    wrist_smoothing_hz: float | None = SMOOTHING_HZ
+    """``computed_torque``: the frequency [Hz] its reference halves (motion well below it
+    passes; :meth:`retarget.wrist_drive.WristReference.from_frames`); ``None``: the reference
+    goes through every command."""
+
+    def __post_init__(self) -> None:
+        check_wrist_driver(self.wrist_driver)
+        hz = self.wrist_smoothing_hz
+        if hz is not None and not (np.isfinite(hz) and hz > 0):
+            raise RetargetError(f"wrist_smoothing_hz must be > 0 or None, got {hz}")
 
 
 @dataclass
@@ -96,7 +132,13 @@ class ValidationResult:
     wrist_pos_err: np.ndarray | None = None
     """(T,) [m] distance of the simulated wrist (its three slide joints) from the command."""
     wrist_rot_err: np.ndarray | None = None
-    """(T,) [rad] largest ``|q_sim − q_command|`` over the wrist's three hinge joints."""
+    """(T,) [rad] rotation angle between the simulated and the commanded wrist orientation."""
+    wrist_force_peak: np.ndarray | None = None
+    """(T,) [N] largest norm, over the frame's physics steps, of the force the arm applies to
+    the wrist (its slide joints' actuator forces plus their gravity compensation); frame 0:
+    the last settling step's."""
+    wrist_torque_peak: np.ndarray | None = None
+    """(T,) [N·m] the same for the largest of the three hinge torques."""
 
     @property
     def object_pos_err_max_m(self) -> float:
@@ -111,17 +153,30 @@ class ValidationResult:
         return float(self.object_rot_err.mean())
 
     def servo_metrics(self) -> dict:
-        """Mean servo tracking errors (empty when the rollout did not record them)."""
+        """Servo tracking errors (empty when the rollout did not record them) and, when
+        recorded, the wrist driver's name, force and torque limits, peaks and saturation
+        (``meta``: ``wrist_driver``, ``wrist_force_limit_n``, ``wrist_torque_limit_nm``,
+        ``wrist_force_saturation_fraction``, ``wrist_torque_saturation_fraction``: the share of
+        the clip's physics steps in which the limit bound)."""
         if self.finger_servo_err is None or self.wrist_pos_err is None:
             return {}
-        return {
+        out = {
             "finger_servo_err_mean_deg": {
                 f: float(np.degrees(self.finger_servo_err[:, i].mean()))
                 for i, f in enumerate(self.fingers)
             },
             "wrist_pos_tracking_err_mean_m": float(self.wrist_pos_err.mean()),
+            "wrist_pos_tracking_err_max_m": float(self.wrist_pos_err.max()),
             "wrist_rot_tracking_err_mean_deg": float(np.degrees(self.wrist_rot_err.mean())),
+            "wrist_rot_tracking_err_max_deg": float(np.degrees(self.wrist_rot_err.max())),
         }
+        if self.wrist_force_peak is not None:
+            out["wrist_force_max_n"] = float(self.wrist_force_peak.max())
+            out["wrist_torque_max_nm"] = float(self.wrist_torque_peak.max())
+        for k in _WRIST_META:
+            if k in self.meta:
+                out[k] = self.meta[k]
+        return out
 
     def metrics(self) -> dict:
         return {
@@ -140,11 +195,30 @@ class ValidationResult:
         }
 
 
+_WRIST_META = (
+    "wrist_driver",
+    "wrist_force_limit_n",
+    "wrist_torque_limit_nm",
+    "wrist_force_saturation_fraction",
+    "wrist_torque_saturation_fraction",
+)
+
+
 def build_sim_scene(
-    hand, geometry, *, table: Table | None = DEFAULT_TABLE, contact_timeconst: float | None = None
+    hand,
+    geometry,
+    *,
+    table: Table | None = DEFAULT_TABLE,
+    contact_timeconst: float | None = None,
+    wrist_driver: str = WRIST_DRIVERS[0],
 ) -> mujoco.MjModel:
-    """Hand with its actuators + the object as a free body (+ ``table``; ``None``: none)."""
+    """Hand with its actuators + the object as a free body (+ ``table``; ``None``: none).
+
+    ``wrist_driver`` ``computed_torque``: the six wrist actuators are motors
+    (:func:`retarget.wrist_drive.use_wrist_motors`); ``servo``: the hand's position servos."""
     spec = hand.build_spec()
+    if check_wrist_driver(wrist_driver) == "computed_torque":
+        use_wrist_motors(spec)
     if table is not None:
         add_table(spec, table)
     add_object(spec, geometry, mocap=False)
@@ -174,6 +248,7 @@ class Resimulator:
             geometry,
             table=self.table if self.cfg.table else None,
             contact_timeconst=self.cfg.contact_timeconst,
+            wrist_driver=self.cfg.wrist_driver,
         )
         m = self.model
         self.object_body = m.body(OBJECT_BODY).id
@@ -196,6 +271,10 @@ class Resimulator:
         self.act_finger = np.where(body_part[jb] < len(self.fingers), body_part[jb], -1)
         wq = [int(m.jnt_qposadr[m.joint(j).id]) for j in WRIST_JOINTS]
         self.wrist_slide_q, self.wrist_hinge_q = np.array(wq[:3]), np.array(wq[3:])
+        self.wrist_act = np.array([m.actuator(f"{j}_act").id for j in WRIST_JOINTS])
+        gains = hand.wrist_gains
+        self.wrist_force_limit = float(gains.force_slide)
+        self.wrist_torque_limit = float(gains.torque_hinge)
 
     def run(
         self,
@@ -223,24 +302,37 @@ class Resimulator:
         d.qpos[self.obj_qadr + 3 : self.obj_qadr + 7] = aa_to_quat_wxyz(r_obj[0])
         d.ctrl[:] = q[0][self.act_q]
         mujoco.mj_forward(m, d)
+        ts = human.timestamp
+        steps = frame_steps(ts, m.opt.timestep)
+        wq = np.r_[self.wrist_slide_q, self.wrist_hinge_q]
+        wrist = self._wrist_stepper(q[:, wq], steps)
+        # the computed-torque driver's reference starts from rest at (nearly) the first command
+        q_hold = wrist.reference.q[0] if wrist.driver is not None else q[0, wq]
+        hold = (q_hold, np.zeros(6), np.zeros(6))
         for _ in range(round(self.cfg.settle_s / m.opt.timestep)):
-            mujoco.mj_step(m, d)
+            wrist.reset_peaks()  # frame 0 (no steps of its own) gets the settling's last
+            wrist.step(d, *hold)
+        wrist.reset_counts()
         F = len(self.fingers) + 1
         forces = np.zeros((T, F, 3))
         pos_sim = np.zeros((T, 3))
         q_sim = np.zeros((T, self.hand_nq))
         rot_sim = np.zeros((T, 3))
+        force_peak = np.zeros(T)
+        torque_peak = np.zeros(T)
         pen = 0.0
-        ts = human.timestamp
+        ref = wrist.reference
         for t in range(T):
-            dt = (ts[t] - ts[t - 1]) if t > 0 else 0.0
-            n_sub = max(round(dt / m.opt.timestep), 0 if t == 0 else 1)
+            n_sub = int(steps[t] - steps[t - 1]) if t > 0 else 0
             acc = np.zeros((F, 3))
             n_read = 0
+            if n_sub:
+                wrist.reset_peaks()
             for k in range(n_sub):
                 a = (k + 1) / n_sub
                 d.ctrl[:] = ((1 - a) * q[t - 1] + a * q[t])[self.act_q]
-                mujoco.mj_step(m, d)
+                j = steps[t - 1] + k
+                wrist.step(d, ref.q[j], ref.v[j], ref.a[j])
                 f, p = self._contact_forces(d)
                 acc += f
                 pen = max(pen, p)
@@ -253,6 +345,7 @@ class Resimulator:
             pos_sim[t] = d.qpos[self.obj_qadr : self.obj_qadr + 3]
             q_sim[t] = d.qpos[: self.hand_nq]
             rot_sim[t] = quat_wxyz_to_aa(d.qpos[self.obj_qadr + 3 : self.obj_qadr + 7])
+            force_peak[t], torque_peak[t] = wrist.force_peak, wrist.torque_peak
             if progress is not None:
                 progress(t + 1, T)
             if not np.all(np.isfinite(d.qpos)):
@@ -286,14 +379,36 @@ class Resimulator:
             wrist_pos_err=np.linalg.norm(
                 q_sim[:, self.wrist_slide_q] - q[:, self.wrist_slide_q], axis=1
             ),
-            wrist_rot_err=dq[:, self.wrist_hinge_q].max(axis=1),
+            wrist_rot_err=_euler_angle_between(
+                q_sim[:, self.wrist_hinge_q], q[:, self.wrist_hinge_q]
+            ),
+            wrist_force_peak=force_peak,
+            wrist_torque_peak=torque_peak,
             meta={
                 "integrator": "implicitfast",
                 "cone": "elliptic",
                 "impratio": float(m.opt.impratio),
                 "timestep": float(m.opt.timestep),
+                "wrist_driver": self.cfg.wrist_driver,
+                "wrist_force_limit_n": self.wrist_force_limit,
+                "wrist_torque_limit_nm": self.wrist_torque_limit,
+                "wrist_force_saturation_fraction": wrist.force_saturated / max(wrist.steps, 1),
+                "wrist_torque_saturation_fraction": wrist.torque_saturated / max(wrist.steps, 1),
             },
         )
+
+    def _wrist_stepper(self, q_wrist: np.ndarray, steps: np.ndarray) -> _WristStepper:
+        m = self.model
+        if self.cfg.wrist_driver == "computed_torque":
+            ref = WristReference.from_frames(
+                q_wrist, steps, m.opt.timestep, self.cfg.wrist_smoothing_hz
+            )
+            driver = ComputedTorqueWrist(m, self.hand.wrist_gains)
+        else:
+            n = int(steps[-1]) + 1  # the servos take the interpolated commands from ``ctrl``
+            ref = WristReference(q=np.zeros((n, 6)), v=np.zeros((n, 6)), a=np.zeros((n, 6)))
+            driver = None
+        return _WristStepper(self, driver, ref)
 
     def _contact_forces(self, d: mujoco.MjData) -> tuple[np.ndarray, float]:
         """(F+1, 3) hand-part forces on the object [N] and the deepest penetration [m]."""
@@ -306,3 +421,62 @@ class Resimulator:
             out[part] += c.force
             pen = max(pen, -c.dist)
         return out, pen
+
+
+def _euler_angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(T,) [rad] rotation angle between the wrist orientations of hinge angles ``a`` and
+    ``b`` (T, 3) (intrinsic X-Y-Z, ``retarget.hands.base``)."""
+    from scipy.spatial.transform import Rotation
+
+    ra = Rotation.from_euler("XYZ", a)
+    rb = Rotation.from_euler("XYZ", b)
+    return (ra.inv() * rb).magnitude()
+
+
+class _WristStepper:
+    """One physics step of a re-simulation with its wrist driver, and the arm's force on the
+    wrist measured after it (module :mod:`retarget.wrist_drive`).
+
+    The measured force is the wrist actuators' plus their gravity compensation, per step;
+    ``force_peak`` [N] (norm over the slides) and ``torque_peak`` [N·m] (largest hinge) since
+    :meth:`reset_peaks`; ``steps`` and the saturated steps since :meth:`reset_counts` (the
+    ``computed_torque`` driver's limits, or a servo at its force range).
+    """
+
+    def __init__(self, sim: Resimulator, driver: ComputedTorqueWrist | None, ref: WristReference):
+        self.m = sim.model
+        self.driver = driver
+        self.reference = ref
+        self.act = sim.wrist_act
+        self.range = self.m.actuator_forcerange[self.act, 1] * (1 - 1e-9)
+        self.limited = self.m.actuator_forcelimited[self.act].astype(bool)
+        self.reset_counts()
+        self.reset_peaks()
+
+    def reset_peaks(self) -> None:
+        self.force_peak = self.torque_peak = 0.0
+
+    def reset_counts(self) -> None:
+        self.steps = self.force_saturated = self.torque_saturated = 0
+        if self.driver is not None:
+            self.driver.reset_counts()
+
+    def step(self, d: mujoco.MjData, q_ref, v_ref, a_ref) -> None:
+        m = self.m
+        if self.driver is None:
+            mujoco.mj_step(m, d)
+            f = np.abs(d.actuator_force[self.act])
+            at = self.limited & (f >= self.range)
+            self.force_saturated += bool(at[:3].any())
+            self.torque_saturated += bool(at[3:].any())
+            self.steps += 1
+        else:
+            mujoco.mj_step1(m, d)
+            self.driver.apply(m, d, q_ref, v_ref, a_ref)
+            mujoco.mj_step2(m, d)
+            self.force_saturated = self.driver.force_saturated
+            self.torque_saturated = self.driver.torque_saturated
+            self.steps = self.driver.steps
+        f = d.actuator_force[self.act] + d.qfrc_gravcomp[:6]
+        self.force_peak = max(self.force_peak, float(np.sqrt(f[:3] @ f[:3])))
+        self.torque_peak = max(self.torque_peak, float(np.abs(f[3:]).max()))

@@ -353,6 +353,17 @@ def test_cli_run_writes_outputs(small_dataset, tmp_path, capsys):
     slides = [names.index(j) for j in ("wrist_tx", "wrist_ty", "wrist_tz")]
     werr = np.linalg.norm(z["q_sim"][:, slides] - z["q_command"][:, slides], axis=1)
     assert m["wrist_pos_tracking_err_mean_m"] == pytest.approx(werr.mean(), rel=1e-9)
+    assert m["wrist_pos_tracking_err_max_m"] == pytest.approx(werr.max(), rel=1e-9)
+    # the wrist's rotation error is the angle between the simulated and commanded orientations
+    from scipy.spatial.transform import Rotation
+
+    hinges = [names.index(j) for j in ("wrist_rx", "wrist_ry", "wrist_rz")]
+    R_sim, R_cmd = (Rotation.from_euler("XYZ", z[k][:, hinges]) for k in ("q_sim", "q_command"))
+    angle = np.degrees((R_sim.inv() * R_cmd).magnitude())
+    assert m["wrist_rot_tracking_err_mean_deg"] == pytest.approx(angle.mean(), rel=1e-6)
+    assert m["wrist_driver"] == "computed_torque"
+    assert (m["wrist_force_limit_n"], m["wrist_torque_limit_nm"]) == (200.0, 20.0)
+    assert 0 < m["wrist_force_max_n"] <= 200.0 and m["wrist_force_saturation_fraction"] == 0.0
     servo = m["finger_servo_err_mean_deg"]
     assert set(servo) == set(allegro.robot_fingers)
     thumb = allegro.robot_fingers.index(allegro.fingers["thumb"])
@@ -386,12 +397,53 @@ def test_cli_run_writes_outputs(small_dataset, tmp_path, capsys):
             ["--hand", "shadow", "--pair", "cube2/tripod", "--set", "iterations=0"],
             "iterations must be >= 1",
         ),
+        *(
+            (
+                ["--hand", "shadow", "--pair", "cube2/tripod", "--time-scale", bad],
+                f"--time-scale must be a finite number from 1 to 10 (the demonstration is "
+                f"executed that many times slower), got '{bad}'",
+            )
+            for bad in ("0.5", "0", "-2", "nan", "inf", "11", "abc")
+        ),
     ],
 )
 def test_cli_run_errors(argv, message, small_dataset, capsys):
     assert main(["run", *argv, "--dataset", str(small_dataset), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "retarget run: error:" in err and message in err
+
+
+def test_cli_run_time_scale_slows_the_demonstration_and_says_so(small_dataset, tmp_path, capsys):
+    """``retarget run --time-scale 2`` executes the demonstration twice as slowly: the same
+    frames at half the rate, recorded in metrics.json and on the terminal; a replay of the run
+    (``retarget.viz``) stretches it alike and reproduces the re-simulation."""
+    from retarget.run import RunConfig, time_scaled
+    from retarget.viz.data import load_human_for_run, load_run, record_resimulation
+
+    out = tmp_path / "slow"
+    argv = ["run", "--hand", "allegro", "--pair", "cube2/tripod", "--dataset",
+            str(small_dataset), "--out", str(out), "--time-scale", "2"]  # fmt: skip
+    assert main(argv) == 0
+    assert "executed 2× slower than demonstrated" in capsys.readouterr().out
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["time_scale"] == 2.0 and m["frames"] == 120 and m["fps"] == pytest.approx(60.0)
+    with np.load(out / "robot_trajectory.npz") as z:
+        np.testing.assert_allclose(np.diff(z["timestamp"]), 2 / 120, rtol=1e-6)
+        obj = z["object_pos_sim"]
+    run = load_run(out)
+    human = load_human_for_run(run)
+    assert human.fps == pytest.approx(60.0)
+    rec = record_resimulation(
+        get_hand("allegro"), object_geometry("cube2"), run.arrays["q_command"], human, metrics=m
+    )
+    np.testing.assert_allclose(rec.result.object_pos_sim, obj, atol=1e-9)
+    # the default executes the demonstration as captured; the stretch keeps every frame
+    assert RunConfig(hand="allegro", pair="cube2/tripod").time_scale == 1.0
+    slow = time_scaled(human, 1.5)
+    assert slow.num_frames == human.num_frames and slow.duration == pytest.approx(
+        1.5 * human.duration
+    )
+    np.testing.assert_array_equal(slow.hand.joint_pos, human.hand.joint_pos)
 
 
 def test_cli_run_set_changes_the_retargeting_and_is_recorded(small_dataset, tmp_path, capsys):

@@ -93,20 +93,22 @@ class ContactParams:
 
 @dataclass(frozen=True)
 class WristGains:
-    """Position servos of the floating wrist (a stand-in for the arm that carries the hand).
+    """Gains and limits of the floating wrist: what the arm that would carry the hand can do.
 
-    Design values, not a robot's: soft enough to stay stable at a 2 ms timestep
-    (``sqrt(kp / (m or I + armature)) * timestep`` well below 1 for every hand here). Held
-    still, the wrist sits on its target; moving, a critically damped servo trails a target
-    moving at speed ``v`` by ``2 v / ω_n`` (``ω_n = sqrt(kp / m)``, ``m`` the hand's mass).
-    Measured by the re-simulation's ``wrist_pos_tracking_err`` (2026-12-05, every hand on
-    ``retarget run --pair cube2/tripod``): mean 2.1 (SVH) to 5.8 mm (Shadow), peaks 7.7 to
-    23.3 mm; Shadow (0.91 kg, ``2/ω_n`` = 0.043 s) 23.3 mm behind a 0.66 m/s reach
-    (error / speed 0.035 s).
-    The orientation servos trail by 0.1–0.3° on average. A velocity lead on the wrist's
-    commands (``(b + k_v)/k_p · q̇``) did not lift more in the force-preservation benchmark
-    (README); three quarters of its force-matched drops end 11 cm or more off (median 12.6
-    cm, 62 failed (d) runs, 2026-12-05), far beyond this lag.
+    Design values of an arm-like carrier, not any robot arm's specification. The models
+    :meth:`HandModel.build_spec` builds drive the six wrist joints with MuJoCo position servos
+    of these gains (critically damped, force range ± ``force_slide`` / ``torque_hinge`` per
+    joint); the re-simulation replaces them with its wrist driver (:mod:`retarget.wrist_drive`):
+    by default a computed-torque controller that feeds the commanded motion forward, with
+    ``kp_slide`` / ``kp_hinge`` as its feedback stiffness, ``dampratio`` its damping ratio,
+    and ``force_slide`` (the norm of the force on the wrist) and ``torque_hinge`` (each hinge's
+    torque) as its limits.
+
+    Both are stable at the 2 ms timestep (``sqrt(kp / (m or I + armature)) · timestep`` well
+    below 1 for every hand here) and sit on a held target (the hand's weight is compensated).
+    Moving, a critically damped servo trails a target moving at speed ``v`` by about
+    ``2 v / ω_n`` (``ω_n = sqrt(kp / m)``, ``m`` the hand's mass: 4 cm at 1 m/s for a 0.9 kg
+    hand); the computed-torque driver follows it (benchmarks/wrist_tracking.py).
     """
 
     kp_slide: float = 2000.0  # [N/m]

@@ -316,9 +316,14 @@ def load_human(
 
 
 def load_human_for_run(run: RunFiles) -> Trajectory:
-    """The demonstration a run was made from (``metrics.json``: dataset, pair, uuid)."""
+    """The demonstration a run was made from (``metrics.json``: dataset, pair, uuid), executed
+    as slowly as the run executed it (``time_scale``, :func:`retarget.run.time_scaled`)."""
+    from retarget.run import time_scaled
+
     m = run.metrics
-    traj = load_human(m["dataset"], m["pair"], uuid=m["uuid"])
+    traj = time_scaled(
+        load_human(m["dataset"], m["pair"], uuid=m["uuid"]), m.get("time_scale", 1.0)
+    )
     if traj.num_frames != run.num_frames:
         raise VizError(
             f"demonstration {m['uuid']} has {traj.num_frames} frames, the run in "
