@@ -184,6 +184,20 @@ def load_subject(cfg: RunConfig):
     return traj, pair, substituted
 
 
+def _parse_pair(cfg: RunConfig):
+    """``cfg.pair`` as a ``Pair`` (an imported dataset's objects in use first)."""
+    from dexcanvas_core.capture import use_dataset_objects
+    from dexcanvas_core.errors import DexCanvasError
+    from dexcanvas_core.taxonomy import Pair
+
+    try:
+        if cfg.dataset is not None:
+            use_dataset_objects(cfg.dataset)
+        return Pair.parse(cfg.pair)
+    except DexCanvasError as e:
+        raise RetargetError(str(e)) from e
+
+
 def _load_demonstration(cfg: RunConfig, pair):
     """The demonstration of ``pair``; for a heavy object without one of its own (the built-in
     data has light objects only), the light object's demonstration, to be simulated with the
@@ -654,6 +668,8 @@ def run_retarget(cfg: RunConfig) -> dict:
             "for force matching: add --forces (or leave --human-replay out)"
         )
     hand = get_hand(cfg.hand)
+    if cfg.pair is not None:  # a pair the hand cannot perform fails before any loading
+        check_pair(hand, _parse_pair(cfg).manipulation_type)
     # The demonstration first: on first use it is built, and the terminal says so at once;
     # the solver's modules compile their numba kernels on a machine's first import (seconds).
     traj, pair, substituted = load_subject(cfg)
