@@ -29,6 +29,8 @@ import numpy as np
 
 from dexcanvas_core.rotations import aa_to_quat_wxyz, quat_wxyz_to_aa, rotation_angle_between_aa
 from dexcanvas_core.sim.forces import object_contacts
+from dexcanvas_core.sim.scene import OBJECT_ANCHOR, OBJECT_HOLD, add_object_hold
+from dexcanvas_core.sim.support import hold_until_frame
 from dexcanvas_core.table import DEFAULT_TABLE, Table
 from dexcanvas_core.trajectory import Trajectory
 from retarget.errors import RetargetError
@@ -123,6 +125,9 @@ class ValidationResult:
     first_failure_frame: int | None
     timestep: float
     meta: dict = field(default_factory=dict)
+    object_held_until_frame: int = 0
+    """Frames before this one held the object at its first pose (it does not rest there by
+    itself, ``dexcanvas_core.sim.support``); 0: never held."""
     q_sim: np.ndarray | None = None
     """(T, hand_nq) simulated hand joint positions at the end of each frame."""
     finger_servo_err: np.ndarray | None = None
@@ -187,6 +192,7 @@ class ValidationResult:
             "object_rot_err_mean_rad": self.object_rot_err_mean_rad,
             "penetration_max_m": float(self.penetration_max_m),
             "first_failure_frame": self.first_failure_frame,
+            "object_held_until_frame": int(self.object_held_until_frame),
             "finger_force_mean_n": {
                 f: float(np.linalg.norm(self.finger_force_world[:, i], axis=1).mean())
                 for i, f in enumerate([*self.fingers, "palm"])
@@ -222,6 +228,7 @@ def build_sim_scene(
     if table is not None:
         add_table(spec, table)
     add_object(spec, geometry, mocap=False)
+    add_object_hold(spec)
     if contact_timeconst is not None:
         spec.option.enableflags |= mujoco.mjtEnableBit.mjENBL_OVERRIDE
         spec.option.o_solref = [contact_timeconst, 1.0]
@@ -256,6 +263,8 @@ class Resimulator:
         self.obj_qadr = int(m.jnt_qposadr[jnt])
         self.obj_vadr = int(m.jnt_dofadr[jnt])
         self.hand_nq = self.obj_qadr  # the hand's joints come first, the object's free joint last
+        self.hold_eq = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, OBJECT_HOLD)
+        self.anchor_mocap = int(m.body_mocapid[m.body(OBJECT_ANCHOR).id])
         # Actuator → hand qpos index of the joint it drives.
         self.act_q = np.array([m.jnt_qposadr[m.actuator_trnid[a, 0]] for a in range(m.nu)])
         parts = hand.hand_parts(m)
@@ -301,6 +310,12 @@ class Resimulator:
         d.qpos[self.obj_qadr : self.obj_qadr + 3] = p_obj[0]
         d.qpos[self.obj_qadr + 3 : self.obj_qadr + 7] = aa_to_quat_wxyz(r_obj[0])
         d.ctrl[:] = q[0][self.act_q]
+        # an object that does not rest by itself at its first pose (it leaned on something not
+        # captured) is held there until the demonstration moves it
+        held_until = (
+            hold_until_frame(self.geometry, human, self.table.top_z_m) if self.cfg.table else 0
+        )
+        self._hold(d, p_obj[0], r_obj[0], held_until > 0)
         mujoco.mj_forward(m, d)
         ts = human.timestamp
         steps = frame_steps(ts, m.opt.timestep)
@@ -323,6 +338,8 @@ class Resimulator:
         pen = 0.0
         ref = wrist.reference
         for t in range(T):
+            if t == held_until:
+                self._hold(d, p_obj[0], r_obj[0], False)
             n_sub = int(steps[t] - steps[t - 1]) if t > 0 else 0
             acc = np.zeros((F, 3))
             n_read = 0
@@ -384,6 +401,7 @@ class Resimulator:
             ),
             wrist_force_peak=force_peak,
             wrist_torque_peak=torque_peak,
+            object_held_until_frame=held_until if held_until < T else T,
             meta={
                 "integrator": "implicitfast",
                 "cone": "elliptic",
@@ -409,6 +427,13 @@ class Resimulator:
             ref = WristReference(q=np.zeros((n, 6)), v=np.zeros((n, 6)), a=np.zeros((n, 6)))
             driver = None
         return _WristStepper(self, driver, ref)
+
+    def _hold(self, d: mujoco.MjData, pos: np.ndarray, rot_aa: np.ndarray, on: bool) -> None:
+        """Weld the object to its pose ``(pos, rot_aa)`` (``on``), or let it go."""
+        if on:
+            d.mocap_pos[self.anchor_mocap] = pos
+            d.mocap_quat[self.anchor_mocap] = aa_to_quat_wxyz(rot_aa)
+        d.eq_active[self.hold_eq] = int(on)
 
     def _contact_forces(self, d: mujoco.MjData) -> tuple[np.ndarray, float]:
         """(F+1, 3) hand-part forces on the object [N] and the deepest penetration [m]."""

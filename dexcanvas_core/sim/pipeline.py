@@ -46,6 +46,7 @@ from dexcanvas_core.sim.reference import (
 from dexcanvas_core.sim.resize import adapt_reference_to_size
 from dexcanvas_core.sim.scene import PhysicsSettings, SimScene, build_scene
 from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S, moving_average
+from dexcanvas_core.sim.support import hold_until_frame
 from dexcanvas_core.sim.tracker import (
     MPCConfig,
     OpenLoop,
@@ -186,6 +187,8 @@ def simulate(
     cfg = SimConfig() if cfg is None else cfg
     geometry, ref, scene = prepare(traj, cfg)
     env = TrackingEnv(scene, ref, cfg.tracking)
+    if scene.table is not None:
+        env.hold_until = hold_until_frame(geometry, traj, scene.table.top_z_m)
     tracker = make_tracker(cfg)
     t0 = time.process_time()
     log = track(env, tracker, progress)
@@ -274,6 +277,7 @@ def _result(traj, cfg, geometry, ref, scene, env, log, cpu_s) -> SimResult:
         "pose_residual_mean_m": float(keypoint_residual(scene, ref).mean()),
         "hinge_clip_max_rad": float(ref.hinge_clip.max()),
         "config": cfg.as_dict(),
+        "object_held_until_frame": int(env.hold_until),
     }
     qpos = np.asarray(log.hand_qpos)
     metrics["failure"] = failure_diagnosis(

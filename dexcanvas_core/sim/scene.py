@@ -239,6 +239,27 @@ class SimScene:
         return d.qpos[a : a + 3].copy(), d.qpos[a + 3 : a + 7].copy()
 
 
+OBJECT_HOLD = "object_hold"
+"""The weld equality that holds the object to the mocap body :data:`OBJECT_ANCHOR`."""
+
+
+def add_object_hold(spec: mujoco.MjSpec) -> None:
+    """A mocap body :data:`OBJECT_ANCHOR` and an inactive weld :data:`OBJECT_HOLD` of the object
+    to it: activated, it holds the object where the anchor is (a clip that starts mid-grasp, an
+    object leaning on something not captured, ``dexcanvas_core.sim.support``)."""
+    anchor = spec.worldbody.add_body(name=OBJECT_ANCHOR, mocap=True)
+    anchor.add_site(name="object_anchor_site", size=[0.002, 0, 0])
+    eq = spec.add_equality(
+        name=OBJECT_HOLD,
+        type=mujoco.mjtEq.mjEQ_WELD,
+        objtype=mujoco.mjtObj.mjOBJ_BODY,
+        name1=OBJECT_BODY,
+        name2=OBJECT_ANCHOR,
+    )
+    eq.active = False
+    eq.solref = [0.02, 1.0]
+
+
 def build_scene(
     geometry,
     skeleton: HandSkeleton,
@@ -272,17 +293,7 @@ def build_scene(
     hand = add_hand(spec, skeleton, R_base=R_base)
     fr = np.array(physics.object_friction) * (friction_scale, 1.0, 1.0)
     add_object(spec, geometry, mocap=False, friction=tuple(fr), mass_kg=mass_kg)
-    anchor = spec.worldbody.add_body(name=OBJECT_ANCHOR, mocap=True)
-    anchor.add_site(name="object_anchor_site", size=[0.002, 0, 0])
-    eq = spec.add_equality(
-        name="object_hold",
-        type=mujoco.mjtEq.mjEQ_WELD,
-        objtype=mujoco.mjtObj.mjOBJ_BODY,
-        name1=OBJECT_BODY,
-        name2=OBJECT_ANCHOR,
-    )
-    eq.active = False
-    eq.solref = [0.02, 1.0]
+    add_object_hold(spec)
     # fingertip positions in the object frame (the tracker's contact-keeping reward)
     from dexcanvas_core.keypoints import FINGERS
 
@@ -316,7 +327,7 @@ def build_scene(
         anchor_mocap=int(
             model.body_mocapid[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, OBJECT_ANCHOR)]
         ),
-        weld_eq=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, "object_hold"),
+        weld_eq=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, OBJECT_HOLD),
         fps=float(fps),
         physics=physics,
         table=table,

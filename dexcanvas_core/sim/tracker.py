@@ -184,6 +184,10 @@ class TrackingEnv:
         self.tip_sensor_adr = tip_sensor_adr
         self.n_tips = ref.tips_object.shape[1]
         self.rollout_data = mujoco.MjData(m)
+        self.hold_until = 0
+        """Frames before this one hold the object at its first pose (an object that does not
+        rest by itself there, ``dexcanvas_core.sim.support``); 0: never held."""
+        self._holding = False
         self._state_spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
         self._state = np.zeros(mujoco.mj_stateSize(m, self._state_spec))
         self.ctrl_low = scene.hand.ctrl_low
@@ -263,18 +267,27 @@ class TrackingEnv:
         self.log = TrackLog()
         airborne = float(sc.support_gap(ref.object_pos[0], ref.object_quat[0])) > 0.005
         n_settle = round((cfg.warmup_s if airborne else cfg.settle_s) / m.opt.timestep)
-        if airborne:
-            d.mocap_pos[sc.anchor_mocap] = ref.object_pos[0]
-            d.mocap_quat[sc.anchor_mocap] = ref.object_quat[0]
-            d.eq_active[sc.weld_eq] = 1
+        self._set_hold(airborne or self.hold_until > 0)
         for _ in range(n_settle):
             mujoco.mj_step(m, d)
-        d.eq_active[sc.weld_eq] = 0
+        if self.hold_until <= 0:
+            self._set_hold(False)
         d.qvel[sc.object_dof_adr : sc.object_dof_adr + 6] = 0.0
         mujoco.mj_forward(m, d)
         acc = FrameAccumulator(1)
         acc.add(read_contacts(sc, d), d.xipos[sc.object_body].copy())
         self._record(finish_frame(acc), self.ctrl_ref[0], np.zeros(self.action_dim))
+
+    def _set_hold(self, on: bool) -> None:
+        """Hold the object at its first reference pose by the weld (in the scene's data and the
+        rollouts'), or let it go."""
+        sc = self.scene
+        for d in (sc.data, self.rollout_data):
+            if on:
+                d.mocap_pos[sc.anchor_mocap] = self.ref.object_pos[0]
+                d.mocap_quat[sc.anchor_mocap] = self.ref.object_quat[0]
+            d.eq_active[sc.weld_eq] = int(on)
+        self._holding = on
 
     def state(self) -> np.ndarray:
         mujoco.mj_getState(self.scene.model, self.scene.data, self._state, self._state_spec)
@@ -375,6 +388,8 @@ class TrackingEnv:
         sc = self.scene
         m, d = sc.model, sc.data
         self.u = np.clip(self.cfg.tau * self.u + a, -1.0, 1.0)
+        if self._holding and self.t + 1 >= self.hold_until:
+            self._set_hold(False)  # the demonstration starts moving the object
         target = self.ctrl_ref[self.t + 1] + self.offset(self.t + 1, self.u)
         d.ctrl[sc.hand.actuator] = self._clip(target)
         acc = FrameAccumulator(sc.substeps)
