@@ -26,6 +26,14 @@ def test_a_cube_on_a_face_rests_one_on_an_edge_or_above_the_table_does_not(cube)
     assert not rests_stably(cube, np.zeros(3), above, 0.0)
 
 
+@pytest.mark.parametrize("oid", ["sphere1", "sphere3"])
+def test_a_ball_rests_on_its_point(oid):
+    g = object_geometry(oid)
+    r = float(g.aabb_half[2])
+    assert rests_stably(g, np.array([0.3, 0.2, 0.1]), np.array([0.4, 0.0, r]), 0.0)
+    assert not rests_stably(g, np.zeros(3), np.array([0.4, 0.0, r + 0.01]), 0.0)
+
+
 def test_hold_until_the_demonstration_moves_it(cube):
     from types import SimpleNamespace
 
