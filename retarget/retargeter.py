@@ -173,6 +173,45 @@ class RetargetConfig:
     simulations (all 7 hands, 180 runs), 0.05 → 0.01: 100 → 95 runs lifted (Allegro 16 → 13,
     LEAP 17 → 15, Panda 7 → 5; the five-finger hands 60 → 62 of 108), and the heavy cube of
     ``retarget run --hand allegro --pair cube2H/tripod --forces`` drops (9.5 cm)."""
+    contact_hover_m: float | None = 0.005
+    """How a contact's error across the surface follows its robot link's signed distance to
+    the object where the link hovers off it (``SurfaceContactObjective.hover``, ``h`` [m]):
+    the error is the link point's offset ``o`` along the human contact's normal plus
+    ``φ(d − o)``, ``d`` the link–object distance, ``φ(x) = x²/h`` below ``h`` and ``x`` beyond
+    (``o + φ ≈ d`` once the link is more than ``h`` farther from the object than from the
+    tangent plane); None: always the offset. The offset is zero anywhere in the tangent plane
+    at the human's point, which a link can be in far off a curved object: a finger lying
+    straight over an apple, level with the human's contact on its side (generated
+    sphere_4_finger on an 85 mm ball: Inspire's index and ring distal links 16 and 23 mm off
+    the ball with the offset alone, within 1 mm with ``h`` = 5 mm). On flat faces the two
+    agree, and the offset brings a link in along the human's normal, where the distance pulls
+    it onto whatever part of the object is nearest: the distance wherever it exceeds the
+    offset left Shadow's thumb on the built-in cube2/lateral_pinch on the cube's other edge,
+    16 mm from the human's pad point (1.8 mm with the offset; so with ``h`` = 5 mm, not with
+    2 mm). A switch from the offset to the distance at ``h`` instead of ``φ`` made the
+    iterations flip between the two rows (Shadow, the ball: 1.7 QP solves per frame instead
+    of 1.1)."""
+    w_closing: float = 50.0
+    """Weight [per m²] of the closing terms: where the human touches the object with more than
+    one phalanx of a finger (a power grasp's distal and middle phalanges), the robot links
+    standing for the others than the contact's are pulled to within ``closing_slack_m`` of
+    the surface too (their signed distance to the object beyond it, from 5 cm in; weight
+    ramped in over ``closing_ramp_s``), so that the finger wraps the object as the human's
+    does. 0: only the contact's link. Measured on the generated sphere_4_finger on an 85 mm
+    ball, Inspire: the proximal links' median distance to the ball 4.8–6.3 mm without, 3.6–4.7
+    mm with."""
+    closing_slack_m: float = 0.004
+    """A closing link within this [m] of the object is left where it is: its term pulls it no
+    nearer, and never pushes it out (the non-penetration rows do). Pulled nearer, Shadow's
+    thumb on the built-in cube2/lateral_pinch turned about its pad as it landed (its proximal
+    link on the cube's edge) and the pad slid down the cube's other edge, 15.6 mm from the
+    human's pad point with 3 mm, 1.8 mm with 4 mm (as without closing terms)."""
+    closing_ramp_s: float = 0.5
+    """A closing term's weight rises from 0 to ``w_closing`` over this long [s] after its
+    human phalanx began to touch: pulled in with the contact's onset, a link can turn the
+    finger about its contact as it lands (see ``closing_slack_m``; with a 2 mm slack, Shadow's
+    lateral-pinch thumb above turned with the pull at once and with a 0.25 s ramp, not with
+    0.5 s)."""
     w_posture: float = 1e-4
     w_smooth: float = 0.05
     damping: float = 1e-5
@@ -383,10 +422,15 @@ class RetargetConfig:
             "self_collision_margin",
             "table_clearance",
             "contact_ramp_s",
+            "closing_ramp_s",
+            "closing_slack_m",
         ):
             v = getattr(self, k)
             if not (np.isfinite(v) and v >= 0):
                 raise RetargetError(f"{k} must be finite and >= 0 [m], got {v}")
+        h = self.contact_hover_m
+        if h is not None and not (np.isfinite(h) and h >= 0):
+            raise RetargetError(f"contact_hover_m must be None or finite and >= 0 [m], got {h}")
         jlm = self.joint_limit_margin
         if jlm is not None and not (np.isfinite(jlm) and jlm >= 0):
             raise RetargetError(f"joint_limit_margin must be None or finite and >= 0, got {jlm}")
@@ -595,6 +639,9 @@ class Retargeter:
                 tangent_weight=(
                     c.force_contact_tangent_weight if c.force_matching else c.contact_tangent_weight
                 ),
+                hover=c.contact_hover_m,
+                closing_weight=c.w_closing,
+                closing_slack=c.closing_slack_m,
             )
         q0 = hand.default_qpos(m)[: self.nq]
         self.q_default = q0
@@ -880,6 +927,25 @@ class Retargeter:
         margins[mask.any(axis=1) & ~allowed] = -self.cfg.noncontact_clearance
         return margins
 
+    def _closing_parts(self, tg: dict, fps: float) -> np.ndarray | None:
+        """(T, F, 3) factors in [0, 1] on ``w_closing`` of the finger parts the human touches
+        the object with besides each finger's contact part (the closing terms' links): 0 where
+        not, rising from 0 to 1 over the ``closing_ramp_s`` after the part's touch began;
+        ``None`` without closing terms."""
+        if self.contacts is None or not (self.cfg.use_contacts and self.cfg.w_closing > 0):
+            return None
+        on = np.asarray(tg["contact_by_part"], bool).copy()
+        part = np.asarray(tg["contact_part"], int)
+        np.put_along_axis(on, part[..., None], False, axis=-1)
+        on &= np.asarray(tg["contact_active"], bool)[..., None]
+        since = np.zeros(on.shape)  # frames each part has been touching, this one included
+        run = np.zeros(on.shape[1:])
+        for t in range(on.shape[0]):
+            run = np.where(on[t], run + 1, 0)
+            since[t] = run
+        n = max(self.cfg.closing_ramp_s * fps, 1.0)
+        return np.clip(since / n, 0.0, 1.0)
+
     def _segment_rows(self, k: int) -> np.ndarray:
         """(F, 2) MANO21 rows of each finger's phalanx ``k`` (0: distal, 1: middle,
         2: proximal; the thumb's 1: proximal, 2: metacarpal)."""
@@ -935,6 +1001,7 @@ class Retargeter:
         obj_quat = aa_to_quat_wxyz(traj.object.rot_aa) if has_obj else None
         clearance = self.collision is not None and self._pair_parts is not None
         margins = self._frame_margins(tg["contact_by_part"]) if clearance else None  # (T, pairs)
+        closing = self._closing_parts(tg, traj.fps)
         try:
             for t in range(T):
                 if has_obj:
@@ -951,6 +1018,7 @@ class Retargeter:
                         tg["contact_part"][t],
                         ramp[t],
                         normals=tg["contact_normals"][t],
+                        closing=None if closing is None else closing[t],
                     )
                 if margins is not None:
                     self.collision.pair_margins = margins[t]

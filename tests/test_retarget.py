@@ -211,16 +211,19 @@ def test_surface_contact_qp_terms_equal_error_and_jacobian(demo):
     np.testing.assert_array_equal(g, before[1])
 
 
-def test_surface_contact_tangent_weight_scales_only_the_tangential_pull(demo):
+@pytest.mark.parametrize("gap", [False, True])
+def test_surface_contact_tangent_weight_scales_only_the_tangential_pull(demo, gap):
     """With surface normals and a tangent weight α, each contact's weight is
     ``w (n nᵀ + α (I − n nᵀ))``: full along the normal, α across it (one pass and base class
-    agree, and both equal that matrix built by hand)."""
+    agree, and both equal that matrix built by hand). With ``contact_hover_m`` 0 the normal
+    row is the link's signed distance ``d`` with the Jacobian ``gᵀ J`` instead of
+    ``nᵀ(p − p*)`` and ``nᵀ J`` (where they differ; on a face they are the same); the
+    tangential rows are the same."""
     from retarget.objectives.base import Objective
 
     alpha = 0.2
-    rt = Retargeter(
-        get_hand("shadow"), object_geometry("cube2"), RetargetConfig(contact_tangent_weight=alpha)
-    )
+    cfg = RetargetConfig(contact_tangent_weight=alpha, contact_hover_m=0.0 if gap else None)
+    rt = Retargeter(get_hand("shadow"), object_geometry("cube2"), cfg)
     tg = rt.human_targets(demo)
     t = int(np.flatnonzero(tg["contact_active"].sum(axis=1) >= 2)[0])
     rt.scene.set_object_pose(demo.object.pos[t], demo.object.rot_aa[t])
@@ -244,11 +247,19 @@ def test_surface_contact_tangent_weight_scales_only_the_tangential_pull(demo):
     P = rt.contacts.finger_point_array(q)[idx]
     J = rt.kin.point_jacobians(tuple(pts[i][0] for i in idx), P)
     Hm, cm = np.zeros_like(H), np.zeros_like(c)
+    _, _, dist = rt.contacts.nearest_of(q, idx)
     for k, i in enumerate(idx):
         u = n[i] / np.linalg.norm(n[i])
-        W = rt.cfg.w_contacts * (np.outer(u, u) + alpha * (np.eye(3) - np.outer(u, u)))
+        W = rt.cfg.w_contacts * alpha * (np.eye(3) - np.outer(u, u))
         Hm += J[k].T @ W @ J[k]
         cm += J[k].T @ W @ (P[k] - tg["contact_points"][t][i])
+        if gap:  # the row d + gᵀ J Δq, g the distance's direction at the link's point
+            g = rt.contacts._cache_g[i]
+            Hm += rt.cfg.w_contacts * np.outer(g @ J[k], g @ J[k])
+            cm += rt.cfg.w_contacts * dist[k] * (g @ J[k])
+        else:
+            Hm += rt.cfg.w_contacts * np.outer(u @ J[k], u @ J[k])
+            cm += rt.cfg.w_contacts * (u @ (P[k] - tg["contact_points"][t][i])) * (u @ J[k])
     np.testing.assert_allclose(H, Hm, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(c, cm, rtol=1e-9, atol=1e-9)
     assert np.abs(cm).max() > 1e-6
