@@ -313,6 +313,15 @@ class SurfaceContactObjective(Objective):
         bodies = tuple(self._cache_b[i] for i in idx.tolist())
         return bodies, self._cache_p[idx], self._cache_d[idx]
 
+    def nearest_directions(self, q: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """(k, 3) for fingers ``idx``: the unit direction in which each contact link's signed
+        distance to the object grows at its nearest point (away from the object: the object's
+        outward normal where the link is nearest it; the target's normal where the two nearest
+        points coincide, zeros before :meth:`set_contacts` gave normals)."""
+        idx = np.asarray(idx, dtype=int)
+        self._nearest(q, idx)
+        return self._cache_g[idx].copy()
+
     def finger_distances(self, q: np.ndarray) -> np.ndarray:
         """(F,) [m] signed distance from each finger to the object (negative: penetrating)."""
         self._nearest(q)
