@@ -1458,7 +1458,25 @@ class Retargeter:
         prediction is clipped to the solver's joint ranges (inside the servos' by
         ``joint_limit_margin``)."""
         q0 = predicted_start(Q_last, wq, active, t, self._solve_lower, self._solve_upper)
-        return Q_last[1] if self._too_deep(q0) else q0
+        return Q_last[1] if self._too_deep(q0) or self._breaks_couplings(q0) else q0
+
+    COUPLING_TOLERANCE = 5e-3
+    """A warm-start prediction whose joint couplings are off by more than this [rad or m] falls
+    back to the last solution (``_warm_start``)."""
+
+    def _breaks_couplings(self, q: np.ndarray) -> bool:
+        """Whether ``q`` breaks one of the model's joint couplings by more than
+        :attr:`COUPLING_TOLERANCE`. The prediction is clipped to the joint ranges joint by
+        joint, so a driving joint stopped at its limit while the joint it drives went on
+        breaks their coupling; the QP's equality rows then ask more than one iterate's
+        velocity bound allows to undo it, and the frame's QP is infeasible (Ability, a
+        generated cuboid1/extension_type with 8 mm of object pose noise: couplings off by
+        0.25 and 0.20 rad against a 0.17 rad bound, the retargeting stopped with an error)."""
+        c = self._coupling
+        if not c or not c.rows:
+            return False
+        _, b = c.equalities(RobotState(q=q, kin=self.kin))
+        return bool(b.size) and float(np.abs(b).max()) > self.COUPLING_TOLERANCE
 
     def _within_limits(self, q: np.ndarray) -> np.ndarray:
         """``q`` clipped to the servo commands' joint ranges (``np.clip`` costs 2.3× as much on

@@ -829,6 +829,29 @@ def test_predicted_start_moves_the_wrist_as_the_human_and_the_fingers_at_their_v
             assert q0[4] == pytest.approx(min(Q[1, 4] + 0.03, upper[4]), abs=1e-12)
 
 
+def test_warm_start_keeps_the_joint_couplings():
+    """Ability's middle joint drives its distal one (``q₉ = 0.72 + 1.06 q₈``). A finger
+    closing back to its range's end: the prediction clips the driving joint at 0 and moves
+    the driven one on, 0.26 rad off the coupling, more than the QP's velocity bound can undo
+    in one iterate (its equality rows made the frame infeasible). The warm start then falls
+    back to the last solution; a prediction inside the ranges is kept."""
+    from robot_poses import coupled
+
+    rt = Retargeter(get_hand("ability"), None)
+    m = rt.scene.model
+    Q = np.tile(rt.q_default, (2, 1))
+    Q[0, 8], Q[1, 8] = 0.30, 0.05  # a middle joint closing back towards 0 (its lower limit)
+    Q = np.stack([coupled(m, q) for q in Q])
+    wq = np.zeros((2, 6))
+    active = np.zeros((3, len(rt.tip_sites)), bool)
+    q0 = rt._warm_start(Q, wq, active, 2)
+    np.testing.assert_array_equal(q0, Q[1])
+    Q[0, 8] = 0.1  # a small step: the prediction stays inside the range and is kept
+    Q = np.stack([coupled(m, q) for q in Q])
+    q0 = rt._warm_start(Q, wq, active, 2)
+    assert q0[8] == pytest.approx(0.0, abs=1e-12) and not np.array_equal(q0, Q[1])
+
+
 def test_predicted_warm_start_takes_fewer_steps_without_overshooting():
     """Frames start from a prediction (wrist moved as the human's, fingers at their last
     velocity): fewer QP solves per frame, the same keypoint error, and no faster wrist at a
