@@ -173,6 +173,62 @@ class RetargetConfig:
     simulations (all 7 hands, 180 runs), 0.05 → 0.01: 100 → 95 runs lifted (Allegro 16 → 13,
     LEAP 17 → 15, Panda 7 → 5; the five-finger hands 60 → 62 of 108), and the heavy cube of
     ``retarget run --hand allegro --pair cube2H/tripod --forces`` drops (9.5 cm)."""
+    contact_hover_m: float | None = 0.005
+    """How a contact's error across the surface follows its robot link's signed distance to
+    the object where the link hovers off it (``SurfaceContactObjective.hover``, ``h`` [m]):
+    the error is the link point's offset ``o`` along the human contact's normal plus
+    ``φ(d − o)``, ``d`` the link–object distance, ``φ(x) = x²/h`` below ``h`` and ``x`` beyond
+    (``o + φ ≈ d`` once the link is more than ``h`` farther from the object than from the
+    tangent plane); None: always the offset. The offset is zero anywhere in the tangent plane
+    at the human's point, which a link can be in far off a curved object: a finger lying
+    straight over an apple, level with the human's contact on its side (generated
+    sphere_4_finger on an 85 mm ball: Inspire's index and ring distal links 16 and 23 mm off
+    the ball with the offset alone, within 1 mm with ``h`` = 5 mm). On flat faces the two
+    agree, and the offset brings a link in along the human's normal, where the distance pulls
+    it onto whatever part of the object is nearest: the distance wherever it exceeds the
+    offset left Shadow's thumb on the built-in cube2/lateral_pinch on the cube's other edge,
+    16 mm from the human's pad point (1.8 mm with the offset; so with ``h`` = 5 mm, not with
+    2 mm). A switch from the offset to the distance at ``h`` instead of ``φ`` made the
+    iterations flip between the two rows (Shadow, the ball: 1.7 QP solves per frame instead
+    of 1.1)."""
+    w_closing: float = 50.0
+    """Weight [per m²] of the closing terms: where the human touches the object with more than
+    one phalanx of a finger (a power grasp's distal and middle phalanges), the robot links
+    standing for the others than the contact's are pulled to within ``closing_slack_m`` of
+    the surface too (their signed distance to the object beyond it, from 5 cm in; weight
+    ramped in over ``closing_ramp_s``), so that the finger wraps the object as the human's
+    does. 0: only the contact's link. Measured on the generated sphere_4_finger on an 85 mm
+    ball, Inspire: the proximal links' median distance to the ball 4.8–6.3 mm without, 3.6–4.7
+    mm with."""
+    closing_slack_m: float = 0.004
+    """A closing link within this [m] of the object is left where it is: its term pulls it no
+    nearer, and never pushes it out (the non-penetration rows do). Pulled nearer, Shadow's
+    thumb on the built-in cube2/lateral_pinch turned about its pad as it landed (its proximal
+    link on the cube's edge) and the pad slid down the cube's other edge, 15.6 mm from the
+    human's pad point with 3 mm, 1.8 mm with 4 mm (as without closing terms)."""
+    closing_ramp_s: float = 0.5
+    """A closing term's weight rises from 0 to ``w_closing`` over this long [s] after its
+    human phalanx began to touch: pulled in with the contact's onset, a link can turn the
+    finger about its contact as it lands. Shadow's thumb on the built-in cube2/lateral_pinch
+    (its pad the contact, its proximal link on the cube's edge): 15.6 mm from the human's pad
+    point at once and with 0.25 s, 1.8 mm with 0.5 s (as without closing terms; with the
+    4 mm ``closing_slack_m``, a 3 mm slack turns it even with 0.5 s). The generated
+    sphere_4_finger's wraps (Inspire) are the same at once and with 0.5 s."""
+    grip_surface_normals: bool = True
+    """The grip (``grip="wrench"``; not force matching, whose forces are the human's own
+    vectors) presses each contacting robot link along the object's normal where that link
+    touches (the direction in which the link–object distance grows at its nearest point) when
+    that is within 45° of the human contact's normal, and its friction cone is about that
+    normal (``Retargeter._surface_normals``). Where the robot's link meets the object
+    elsewhere than the human's phalanx (a larger hand on a ball: its fingertips on the upper
+    side, the human's on the equator) a push along the human's normal slides the link over the
+    surface. Measured on a generated precision_sphere on an 85 mm ball: Ability dropped it
+    with the human's normals (18.8 cm) and holds it with these (1.7 cm); Inspire drops it
+    either way (21.4, 12.1 cm). Without the 45° bound (links on a cube's edge pressing
+    diagonally), with the contact terms' distance everywhere (``contact_hover_m`` 0): strict
+    re-simulation success 36 against 49 of 64 runs (16 pairs × Shadow, Allegro, Inspire,
+    Ability). Force matching with the robot's normals: Allegro on a force-annotated
+    cube2/tripod pressed 0.27 of the human's force instead of 0.99."""
     w_posture: float = 1e-4
     w_smooth: float = 0.05
     damping: float = 1e-5
@@ -383,10 +439,15 @@ class RetargetConfig:
             "self_collision_margin",
             "table_clearance",
             "contact_ramp_s",
+            "closing_ramp_s",
+            "closing_slack_m",
         ):
             v = getattr(self, k)
             if not (np.isfinite(v) and v >= 0):
                 raise RetargetError(f"{k} must be finite and >= 0 [m], got {v}")
+        h = self.contact_hover_m
+        if h is not None and not (np.isfinite(h) and h >= 0):
+            raise RetargetError(f"contact_hover_m must be None or finite and >= 0 [m], got {h}")
         jlm = self.joint_limit_margin
         if jlm is not None and not (np.isfinite(jlm) and jlm >= 0):
             raise RetargetError(f"joint_limit_margin must be None or finite and >= 0, got {jlm}")
@@ -595,6 +656,9 @@ class Retargeter:
                 tangent_weight=(
                     c.force_contact_tangent_weight if c.force_matching else c.contact_tangent_weight
                 ),
+                hover=c.contact_hover_m,
+                closing_weight=c.w_closing,
+                closing_slack=c.closing_slack_m,
             )
         q0 = hand.default_qpos(m)[: self.nq]
         self.q_default = q0
@@ -880,6 +944,25 @@ class Retargeter:
         margins[mask.any(axis=1) & ~allowed] = -self.cfg.noncontact_clearance
         return margins
 
+    def _closing_parts(self, tg: dict, fps: float) -> np.ndarray | None:
+        """(T, F, 3) factors in [0, 1] on ``w_closing`` of the finger parts the human touches
+        the object with besides each finger's contact part (the closing terms' links): 0 where
+        not, rising from 0 to 1 over the ``closing_ramp_s`` after the part's touch began;
+        ``None`` without closing terms."""
+        if self.contacts is None or not (self.cfg.use_contacts and self.cfg.w_closing > 0):
+            return None
+        on = np.asarray(tg["contact_by_part"], bool).copy()
+        part = np.asarray(tg["contact_part"], int)
+        np.put_along_axis(on, part[..., None], False, axis=-1)
+        on &= np.asarray(tg["contact_active"], bool)[..., None]
+        since = np.zeros(on.shape)  # frames each part has been touching, this one included
+        run = np.zeros(on.shape[1:])
+        for t in range(on.shape[0]):
+            run = np.where(on[t], run + 1, 0)
+            since[t] = run
+        n = max(self.cfg.closing_ramp_s * fps, 1.0)
+        return np.clip(since / n, 0.0, 1.0)
+
     def _segment_rows(self, k: int) -> np.ndarray:
         """(F, 2) MANO21 rows of each finger's phalanx ``k`` (0: distal, 1: middle,
         2: proximal; the thumb's 1: proximal, 2: metacarpal)."""
@@ -935,6 +1018,7 @@ class Retargeter:
         obj_quat = aa_to_quat_wxyz(traj.object.rot_aa) if has_obj else None
         clearance = self.collision is not None and self._pair_parts is not None
         margins = self._frame_margins(tg["contact_by_part"]) if clearance else None  # (T, pairs)
+        closing = self._closing_parts(tg, traj.fps)
         try:
             for t in range(T):
                 if has_obj:
@@ -951,6 +1035,7 @@ class Retargeter:
                         tg["contact_part"][t],
                         ramp[t],
                         normals=tg["contact_normals"][t],
+                        closing=None if closing is None else closing[t],
                     )
                 if margins is not None:
                     self.collision.pair_margins = margins[t]
@@ -1171,6 +1256,16 @@ class Retargeter:
         C = self._servo_follower_map(q)
         Jall = Jall @ C
         dq = np.zeros(self.nq)
+        # The robot link presses where it touches, along the object's normal there
+        # (``grip_surface_normals``), which is not the human's where the robot's link meets
+        # the object elsewhere (a larger hand's fingertip on an apple's upper side, the
+        # human's on its equator). Force matching keeps the human's normals: its forces are
+        # the human's own vectors, their cones the human's (with the robot's normals Allegro
+        # on a force-annotated cube2/tripod pressed 0.27 of the human's force, not 0.99).
+        normals = normals.copy()
+        if self.cfg.grip_surface_normals and fm["mode"] != "human":
+            normals[idx] = self._surface_normals(q, idx, normals[idx])
+            f_des = -self.cfg.grip_force_n * normals * opp[:, None]
         if pressed.any():
             ia = idx[pressed]
             J = list(Jall[pressed])
@@ -1205,7 +1300,8 @@ class Retargeter:
         target = np.where(pressed, 0.0, self.cfg.idle_contact_clearance or 0.0)
         # A finger point inside the object (the solution's penetration margin) has no such
         # gradient to trust near an edge (the nearest face from inside may not be the one it
-        # went through): it keeps the human contact's normal.
+        # went through): it keeps the human contact's normal (a pressed one: the normal where
+        # it touches with ``grip_surface_normals``).
         step_normals = normals[idx].copy()
         if (~pressed).any() and self.geometry is not None:
             R_o, p_o = fm["R_obj"][t], fm["p_obj"][t]
@@ -1218,6 +1314,26 @@ class Retargeter:
                 delta = -(err[:, None] * step_normals[group]).reshape(-1)
                 dq = dq + _damped_step(Jall[group].reshape(-1, self.nq), delta)
         return self._within_limits(q + C @ dq) - q
+
+    def _surface_normals(self, q: np.ndarray, idx: np.ndarray, human: np.ndarray) -> np.ndarray:
+        """(k, 3) for the contacting fingers ``idx`` at ``q``: the object's outward normal
+        [world] where each finger's contact link is nearest it (the direction in which the
+        link–object distance grows, from the contact term's distance query: the gradient of
+        the object's signed distance at that point), where the link is outside the surface or
+        within the penetration margin + 0.5 mm of it and that normal is within 45° of the
+        human contact's (``human`` (k, 3)): the link touches the face the human's phalanx
+        does. Elsewhere the human's normal: deeper, the nearest face from inside need not be
+        the one the link touches; beyond 45°, the link's nearest point is on an edge or
+        another face (a fingertip over a cube's edge), where pressing along that normal does
+        not squeeze the object as the human does."""
+        out = np.array(human, dtype=np.float64, copy=True)
+        _, _, gap = self.contacts.nearest_of(q, idx)
+        n = self.contacts.nearest_directions(q, idx)
+        use = (gap > -(self.cfg.penetration_margin + 5e-4)) & (
+            np.einsum("ki,ki->k", n, out) > np.cos(np.radians(45.0))
+        )
+        out[use] = n[use]
+        return out
 
     def _servo_follower_map(self, q: np.ndarray) -> np.ndarray:
         """``(nq, nq)`` map from a displacement of the servoed finger joints to every joint's,
@@ -1347,7 +1463,25 @@ class Retargeter:
         prediction is clipped to the solver's joint ranges (inside the servos' by
         ``joint_limit_margin``)."""
         q0 = predicted_start(Q_last, wq, active, t, self._solve_lower, self._solve_upper)
-        return Q_last[1] if self._too_deep(q0) else q0
+        return Q_last[1] if self._too_deep(q0) or self._breaks_couplings(q0) else q0
+
+    COUPLING_TOLERANCE = 5e-3
+    """A warm-start prediction whose joint couplings are off by more than this [rad or m] falls
+    back to the last solution (``_warm_start``)."""
+
+    def _breaks_couplings(self, q: np.ndarray) -> bool:
+        """Whether ``q`` breaks one of the model's joint couplings by more than
+        :attr:`COUPLING_TOLERANCE`. The prediction is clipped to the joint ranges joint by
+        joint, so a driving joint stopped at its limit while the joint it drives went on
+        breaks their coupling; the QP's equality rows then ask more than one iterate's
+        velocity bound allows to undo it, and the frame's QP is infeasible (Ability, a
+        generated cuboid1/extension_type with 8 mm of object pose noise: couplings off by
+        0.25 and 0.20 rad against a 0.17 rad bound, the retargeting stopped with an error)."""
+        c = self._coupling
+        if not c or not c.rows:
+            return False
+        _, b = c.equalities(RobotState(q=q, kin=self.kin))
+        return bool(b.size) and float(np.abs(b).max()) > self.COUPLING_TOLERANCE
 
     def _within_limits(self, q: np.ndarray) -> np.ndarray:
         """``q`` clipped to the servo commands' joint ranges (``np.clip`` costs 2.3× as much on

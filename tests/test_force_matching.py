@@ -478,8 +478,9 @@ def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
     """Allegro on the built-in cuboid3/palmar_pinch (the 5 × 5 × 2.5 cm, 22 g cuboid),
     retargeted with the fixed-depth grip, each frame started from the last solution and
     isotropic contact targets (``grip="depth"``, ``warm_start_extrapolate=False``,
-    ``contact_tangent_weight=1``, and the earlier wrist and posture weights 0.3 and 1e-3: the
-    defaults hold this one open loop): replayed open loop (default soft contacts) the cuboid
+    ``contact_tangent_weight=1``, the earlier wrist and posture weights 0.3 and 1e-3, contact
+    offsets along the human's normals only and no closing terms: the defaults hold this one
+    open loop): replayed open loop (default soft contacts) the cuboid
     slips out (at frame 304); the sampling MPC on the robot hand keeps it (DexCanvas rule, no
     frame over 5 cm), moving the commanded wrist by under a millimetre (0.7 mm)."""
     from dexcanvas_core.demos.geometry import object_geometry
@@ -501,6 +502,8 @@ def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
             w_wrist_pos=0.3,
             w_wrist_rot=0.3,
             w_posture=1e-3,
+            contact_hover_m=None,
+            w_closing=0.0,
         ),
     )
     robot = rt.retarget(demo)

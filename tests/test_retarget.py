@@ -211,16 +211,19 @@ def test_surface_contact_qp_terms_equal_error_and_jacobian(demo):
     np.testing.assert_array_equal(g, before[1])
 
 
-def test_surface_contact_tangent_weight_scales_only_the_tangential_pull(demo):
+@pytest.mark.parametrize("gap", [False, True])
+def test_surface_contact_tangent_weight_scales_only_the_tangential_pull(demo, gap):
     """With surface normals and a tangent weight α, each contact's weight is
     ``w (n nᵀ + α (I − n nᵀ))``: full along the normal, α across it (one pass and base class
-    agree, and both equal that matrix built by hand)."""
+    agree, and both equal that matrix built by hand). With ``contact_hover_m`` 0 the normal
+    row is the link's signed distance ``d`` with the Jacobian ``gᵀ J`` instead of
+    ``nᵀ(p − p*)`` and ``nᵀ J`` (where they differ; on a face they are the same); the
+    tangential rows are the same."""
     from retarget.objectives.base import Objective
 
     alpha = 0.2
-    rt = Retargeter(
-        get_hand("shadow"), object_geometry("cube2"), RetargetConfig(contact_tangent_weight=alpha)
-    )
+    cfg = RetargetConfig(contact_tangent_weight=alpha, contact_hover_m=0.0 if gap else None)
+    rt = Retargeter(get_hand("shadow"), object_geometry("cube2"), cfg)
     tg = rt.human_targets(demo)
     t = int(np.flatnonzero(tg["contact_active"].sum(axis=1) >= 2)[0])
     rt.scene.set_object_pose(demo.object.pos[t], demo.object.rot_aa[t])
@@ -244,11 +247,19 @@ def test_surface_contact_tangent_weight_scales_only_the_tangential_pull(demo):
     P = rt.contacts.finger_point_array(q)[idx]
     J = rt.kin.point_jacobians(tuple(pts[i][0] for i in idx), P)
     Hm, cm = np.zeros_like(H), np.zeros_like(c)
+    _, _, dist = rt.contacts.nearest_of(q, idx)
     for k, i in enumerate(idx):
         u = n[i] / np.linalg.norm(n[i])
-        W = rt.cfg.w_contacts * (np.outer(u, u) + alpha * (np.eye(3) - np.outer(u, u)))
+        W = rt.cfg.w_contacts * alpha * (np.eye(3) - np.outer(u, u))
         Hm += J[k].T @ W @ J[k]
         cm += J[k].T @ W @ (P[k] - tg["contact_points"][t][i])
+        if gap:  # the row d + gᵀ J Δq, g the distance's direction at the link's point
+            g = rt.contacts._cache_g[i]
+            Hm += rt.cfg.w_contacts * np.outer(g @ J[k], g @ J[k])
+            cm += rt.cfg.w_contacts * dist[k] * (g @ J[k])
+        else:
+            Hm += rt.cfg.w_contacts * np.outer(u @ J[k], u @ J[k])
+            cm += rt.cfg.w_contacts * (u @ (P[k] - tg["contact_points"][t][i])) * (u @ J[k])
     np.testing.assert_allclose(H, Hm, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(c, cm, rtol=1e-9, atol=1e-9)
     assert np.abs(cm).max() > 1e-6
@@ -868,6 +879,29 @@ def test_predicted_start_moves_the_wrist_as_the_human_and_the_fingers_at_their_v
         np.testing.assert_allclose(q0, np.clip(want, lower, upper), atol=1e-12)
         if case % 4 == 0:  # a 0.03 rad step, not −2π + 0.03
             assert q0[4] == pytest.approx(min(Q[1, 4] + 0.03, upper[4]), abs=1e-12)
+
+
+def test_warm_start_keeps_the_joint_couplings():
+    """Ability's middle joint drives its distal one (``q₉ = 0.72 + 1.06 q₈``). A finger
+    closing back to its range's end: the prediction clips the driving joint at 0 and moves
+    the driven one on, 0.26 rad off the coupling, more than the QP's velocity bound can undo
+    in one iterate (its equality rows made the frame infeasible). The warm start then falls
+    back to the last solution; a prediction inside the ranges is kept."""
+    from robot_poses import coupled
+
+    rt = Retargeter(get_hand("ability"), None)
+    m = rt.scene.model
+    Q = np.tile(rt.q_default, (2, 1))
+    Q[0, 8], Q[1, 8] = 0.30, 0.05  # a middle joint closing back towards 0 (its lower limit)
+    Q = np.stack([coupled(m, q) for q in Q])
+    wq = np.zeros((2, 6))
+    active = np.zeros((3, len(rt.tip_sites)), bool)
+    q0 = rt._warm_start(Q, wq, active, 2)
+    np.testing.assert_array_equal(q0, Q[1])
+    Q[0, 8] = 0.1  # a small step: the prediction stays inside the range and is kept
+    Q = np.stack([coupled(m, q) for q in Q])
+    q0 = rt._warm_start(Q, wq, active, 2)
+    assert q0[8] == pytest.approx(0.0, abs=1e-12) and not np.array_equal(q0, Q[1])
 
 
 def test_predicted_warm_start_takes_fewer_steps_without_overshooting():

@@ -71,12 +71,17 @@ def add_diagonal(P, c, w, r):
             c[a] += w[a] * r[a]
 
 
-@kernel(F3C, F2, F2, F3, I1, BOOL, FLOAT, F1, FLOAT, F2CW, F1CW)
-def surface_gram(J, points, targets, frames, idx, split, weight, ramp, tangent_weight, P, c):
+@kernel(F3C, F2, F2, F3, I1, BOOL, FLOAT, F1, FLOAT, BOOL, F1, F2, F2CW, F1CW)
+def surface_gram(
+    J, points, targets, frames, idx, split, weight, ramp, tangent_weight, use_gap, gap, gdir, P, c
+):
     """The surface-contact term of the active fingers ``idx``: per finger ``k`` (finger
     ``f = idx[k]``) the error ``points[k] − targets[f]`` and its point Jacobian ``J[k]``
     (3, nv), in the target's (normal, t₁, t₂) frame ``frames[f]`` when ``split`` (the
-    tangential rows weighted ``tangent_weight``), each row weighted ``weight · ramp[f]``."""
+    tangential rows weighted ``tangent_weight``), each row weighted ``weight · ramp[f]``.
+    With ``use_gap`` (and ``split``) the normal row's error and direction are instead
+    ``gap[k]`` and ``gdir[k]`` (its Jacobian ``gdir[k]ᵀ J[k]``): the link's signed distance
+    where it hovers off the surface (``SurfaceContactObjective.hover``)."""
     row = np.empty(P.shape[0])
     d = np.empty(3)
     for k in range(idx.shape[0]):
@@ -90,8 +95,8 @@ def surface_gram(J, points, targets, frames, idx, split, weight, ramp, tangent_w
             if wi == 0.0:
                 continue
             if split:
-                u = frames[f, r]
-                e = u[0] * d[0] + u[1] * d[1] + u[2] * d[2]
+                u = gdir[k] if (use_gap and r == 0) else frames[f, r]
+                e = gap[k] if (use_gap and r == 0) else u[0] * d[0] + u[1] * d[1] + u[2] * d[2]
                 row[:] = u[0] * J[k, 0] + u[1] * J[k, 1] + u[2] * J[k, 2]
                 _add_row(row, wi, e, P, c)
             else:
