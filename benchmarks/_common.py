@@ -248,6 +248,21 @@ def progress_bar(console):
     )
 
 
+def machine_info(load_start, **extra) -> dict:
+    """What a result's ``machine`` records: platform, Python, CPU count, the load average at the
+    start (``load_start``, ``os.getloadavg()`` then) and now, and ``extra`` (e.g. workers)."""
+    import platform
+
+    return {
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+        "cpu_count": os.cpu_count(),
+        "loadavg_start": load_start,
+        "loadavg_end": os.getloadavg(),
+        **extra,
+    }
+
+
 def git_commit() -> str | None:
     """The checkout's commit (``git rev-parse --short HEAD``, ``+dirty`` with uncommitted
     changes to tracked files), or ``None`` outside a git checkout."""

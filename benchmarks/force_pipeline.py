@@ -65,7 +65,6 @@ import dataclasses
 import logging
 import multiprocessing
 import os
-import platform
 import sys
 import time
 import traceback
@@ -79,6 +78,7 @@ from _common import (
     atomic_write_json,
     generate_one,
     git_commit,
+    machine_info,
     operator_for,
     parse_override,
     pick_pairs,
@@ -761,14 +761,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         "size_perturbation": SIZE_PERTURBATION,
         "demonstrations": [demos[i] for i in sorted(demos)],
         "commit": git_commit(),
-        "machine": {
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-            "cpu_count": os.cpu_count(),
-            "loadavg_start": load0,
-            "loadavg_end": os.getloadavg(),
-            "threads_per_worker": 1,
-        },
+        "machine": machine_info(load0, threads_per_worker=1),
         "versions": _versions(),
         "definitions": {
             "success_rate": "strict DexCanvas rule over runs (errors count as failures)",

@@ -109,7 +109,6 @@ import itertools
 import logging
 import multiprocessing
 import os
-import platform
 import sys
 import time
 import traceback
@@ -125,6 +124,7 @@ from _common import (
     config_overrides,
     git_commit,
     load_demonstrations,
+    machine_info,
     parse_override,
     progress_bar,
     resim_result,
@@ -1703,14 +1703,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         "five_finger_hands": five,
         "skipped": skipped,
         "commit": git_commit(),
-        "machine": {
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-            "cpu_count": os.cpu_count(),
-            "loadavg_start": load0,
-            "loadavg_end": os.getloadavg(),
-            "threads_per_worker": 1,
-        },
+        "machine": machine_info(load0, threads_per_worker=1),
         "versions": versions(VERSION_DISTS),
         "definitions": {
             "success": "Resimulator strict rule (no frame with object error > 5 cm)",

@@ -64,7 +64,6 @@ import json
 import math
 import multiprocessing
 import os
-import platform
 import re
 import sys
 import time
@@ -75,6 +74,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+from _common import git_commit, json_default, machine_info, versions
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "real_motion.json"
@@ -530,7 +530,7 @@ class JobStore:
 
     def save(self, rec: dict) -> Path:
         p = self.path(rec["key"])
-        _atomic_write(p, json.dumps(rec, indent=1, default=_json_default))
+        _atomic_write(p, json.dumps(rec, indent=1, default=json_default))
         return p
 
     def done(self, key: str, uuid: str | None = None, retry_errors: bool = False) -> dict | None:
@@ -541,16 +541,6 @@ class JobStore:
         if retry_errors and rec.get("error"):
             return None
         return rec
-
-
-def _json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
 # ---------------------------------------------------------------------------------- metrics
@@ -1331,9 +1321,6 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
     from rich.console import Console
     from rich.markup import escape
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from _common import git_commit, versions
-
     console = console or Console(width=None if sys.stdout.isatty() else 140)
     cfg = cfg.validate()
     t0 = time.perf_counter()
@@ -1371,14 +1358,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         "records": records,
         "summary": summarize(records, hands, five),
         "commit": git_commit(),
-        "machine": {
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-            "cpu_count": os.cpu_count(),
-            "loadavg_start": load0,
-            "loadavg_end": os.getloadavg(),
-            "workers": cfg.workers,
-        },
+        "machine": machine_info(load0, workers=cfg.workers),
         "versions": versions(("dexcanvas-retarget", "mujoco", "pin", "numpy", "lance")),
         "definitions": {
             "strict_success": "no frame of the contact window (object_move start..end) with "
@@ -1397,7 +1377,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
     }
     print_tables(doc, console)
     Path(cfg.out).parent.mkdir(parents=True, exist_ok=True)
-    _atomic_write(Path(cfg.out), json.dumps(doc, indent=1, default=_json_default))
+    _atomic_write(Path(cfg.out), json.dumps(doc, indent=1, default=json_default))
     console.print(f"wrote {cfg.out} ({doc['wall_time_s']:.0f} s)")
     if cfg.page is not None:
         _atomic_write(Path(cfg.page), page_markdown(doc))

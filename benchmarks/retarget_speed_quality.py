@@ -52,7 +52,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 import time
 import traceback
@@ -65,6 +64,7 @@ from _common import (
     config_overrides,
     git_commit,
     load_demonstrations,
+    machine_info,
     parse_override,
     progress_bar,
     resim,
@@ -460,13 +460,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         "hands": [h.name for h in hands],
         "skipped": skipped,
         "commit": git_commit(),
-        "machine": {
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-            "cpu_count": os.cpu_count(),
-            "loadavg_start": load0,
-            "loadavg_end": os.getloadavg(),
-        },
+        "machine": machine_info(load0),
         "versions": versions(VERSION_DISTS),
         "definitions": {
             "ms_per_frame": "per-frame solve time only (ours: Retargeter._warm_start + "

@@ -46,13 +46,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-from _common import atomic_write_json, git_commit, progress_bar, versions
+from _common import atomic_write_json, git_commit, machine_info, progress_bar, versions
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "wrist_tracking.json"
@@ -429,13 +428,7 @@ def run_benchmark(args, console) -> dict:
         "drivers": DRIVERS,
         "limits": {"force_n": g.force_slide, "torque_nm": g.torque_hinge},
         "commit": git_commit(),
-        "machine": {
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-            "cpu_count": os.cpu_count(),
-            "loadavg_start": load0,
-            "loadavg_end": os.getloadavg(),
-        },
+        "machine": machine_info(load0),
         "versions": versions(("dexcanvas-retarget", "mujoco", "numpy", "scipy")),
         "definitions": {
             "pos_err_*_mm": "distance of the simulated wrist point (slide joints) from the "
