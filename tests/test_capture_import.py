@@ -12,8 +12,8 @@ import pytest
 import trimesh
 
 from dexcanvas_core.capture import ImportConfig, capture_from_arrays, run_import
-from dexcanvas_core.capture.arrays import rotation_to_z_up, up_vector
 from dexcanvas_core.capture.export import write_mano_npz
+from dexcanvas_core.capture.world import rotation_to_z_up, up_vector
 from dexcanvas_core.errors import DatasetError, ValidationError
 from dexcanvas_core.io import open_dataset
 from dexcanvas_core.keypoints import convert_keypoints

@@ -37,26 +37,18 @@ ignored (and listed in the import report).
 
 from __future__ import annotations
 
-import logging
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from dexcanvas_core.capture.capture import Capture
+from dexcanvas_core.capture.world import mirror_capture, to_z_up, up_vector
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.mano.pose import mirror_axis_angle
-from dexcanvas_core.rotations import (
-    aa_to_matrix,
-    matrix_to_aa,
-    matrix_to_quat_wxyz,
-    quat_wxyz_to_matrix,
-)
-
-log = logging.getLogger(__name__)
 
 KEYS: tuple[str, ...] = (
     "fps", "global_orient", "hand_pose", "flat_hand_mean", "wrist_pos", "transl", "betas",
@@ -73,66 +65,7 @@ REQUIRED: tuple[str, ...] = (
 MAX_POSITION_M = 20.0
 """Positions beyond this distance from the origin [m] are taken for another unit (mm, cm)."""
 
-_AXES = {"x": 0, "y": 1, "z": 2}
 _NAME = re.compile(r"[A-Za-z0-9_.\-]+")
-
-
-@dataclass
-class Capture:
-    """One captured sequence, normalised: right hand, world z up, metres, flat-hand-mean poses.
-
-    Attributes:
-        name: the sequence's name (its file or directory stem).
-        source: where it came from (format and path).
-        fps: frame rate [Hz].
-        global_orient: (T, 3) wrist orientation, axis-angle [rad].
-        hand_pose: (T, 45) finger joints [rad], flat-hand-mean convention.
-        wrist_pos: (T, 3) wrist joint J0 [m] (from ``transl``: ``J0(betas) + transl``).
-        betas: (10,) MANO shape.
-        keypoints: (T, 21, 3) MANO21 keypoints [m], or ``None``.
-        object_name: the object's id.
-        object_pos: (T, 3) [m].
-        object_quat_wxyz: (T, 4).
-        mesh_vertices: (V, 3) [m] in the object frame (mirrored with the scene).
-        mesh_faces: (F, 3) vertex indices.
-        mesh_file: the mesh file the vertices came from, ``None`` when inline.
-        object_mass_kg: mass [kg] given with the sequence, or ``None``.
-        table_height: table top height [m] (world z), or ``None`` (no table).
-        contact_window: (first, last) interaction frame, or ``None``.
-        manipulation_type: a manipulation type name or ``"unknown"``.
-        mirrored: True when a left hand was mirrored to a right one.
-        up: the file's up direction (unit 3-vector in its own frame) that became +z.
-        ignored_keys: keys of the file this toolkit does not read.
-        pose_fit_mm: when the sequence gave keypoints but no pose, the mean keypoint distance
-            [mm] of the pose fitted to them (``dexcanvas_core.capture.fit``); else None.
-    """
-
-    name: str
-    source: str
-    fps: float
-    global_orient: np.ndarray
-    hand_pose: np.ndarray
-    wrist_pos: np.ndarray
-    betas: np.ndarray
-    keypoints: np.ndarray | None
-    object_name: str
-    object_pos: np.ndarray
-    object_quat_wxyz: np.ndarray
-    mesh_vertices: np.ndarray
-    mesh_faces: np.ndarray
-    mesh_file: Path | None = None
-    object_mass_kg: float | None = None
-    table_height: float | None = None
-    contact_window: tuple[int, int] | None = None
-    manipulation_type: str = "unknown"
-    mirrored: bool = False
-    up: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
-    ignored_keys: tuple[str, ...] = ()
-    pose_fit_mm: float | None = None
-
-    @property
-    def num_frames(self) -> int:
-        return self.global_orient.shape[0]
 
 
 # -- reading the keys -------------------------------------------------------------------------
@@ -188,53 +121,6 @@ def _bool(arrays: Mapping[str, Any], key: str, default: bool, where: str) -> boo
     if isinstance(v, bool | np.bool_) or v in (0, 1):
         return bool(v)
     raise ValidationError(f"{where}: {key} must be true or false, got {v!r}", field=key)
-
-
-def up_vector(up: Any, where: str = "up_axis") -> np.ndarray:
-    """The unit up vector of ``up``: an axis name (``'z'``, ``'y'``, ``'-y'``, …) or a 3-vector.
-
-    Raises:
-        ValidationError: anything else.
-    """
-    if isinstance(up, bytes):
-        up = up.decode()
-    if isinstance(up, np.ndarray) and up.shape == ():
-        up = up.item()
-    if isinstance(up, str):
-        s = up.strip().lower()
-        sign = -1.0 if s.startswith("-") else 1.0
-        axis = s.lstrip("+-")
-        if axis not in _AXES:
-            raise ValidationError(
-                f"{where}: up_axis {up!r} is not an axis; give 'z' (default), 'y', '-y', 'x', … "
-                "or a 3-vector pointing against gravity",
-                field="up_axis",
-            )
-        v = np.zeros(3)
-        v[_AXES[axis]] = sign
-        return v
-    try:
-        v = np.asarray(up, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        v = np.zeros(0)
-    n = float(np.linalg.norm(v)) if v.shape == (3,) else 0.0
-    if v.shape != (3,) or not math.isfinite(n) or n < 1e-6:
-        raise ValidationError(
-            f"{where}: up_axis must be 'z', 'y', … or a non-zero 3-vector, got {up!r}",
-            field="up_axis",
-        )
-    return v / n
-
-
-def rotation_to_z_up(up: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation taking the unit vector ``up`` to +z (the smallest such rotation; for
-    ``up = -z``, half a turn about x)."""
-    z = np.array([0.0, 0.0, 1.0])
-    axis = np.cross(up, z)
-    s, c = float(np.linalg.norm(axis)), float(np.dot(up, z))
-    if s < 1e-12:
-        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
-    return aa_to_matrix(axis / s * math.atan2(s, c))
 
 
 def _mesh(arrays: Mapping[str, Any], base_dir: Path | None, where: str):
@@ -529,31 +415,6 @@ def _pose_from_keypoints(arrays: Mapping[str, Any], where: str) -> tuple[dict, f
     return out, float(np.mean(fit["residual_mm"]))
 
 
-def mirror_capture(cap: Capture) -> Capture:
-    """The scene mirrored across the world's x = 0 plane: a left hand becomes the right hand that
-    mirrors it (axis-angles ``(x, y, z) → (x, -y, -z)``), the object's poses and mesh are
-    mirrored too (faces flipped to keep outward normals)."""
-    M = np.diag([-1.0, 1.0, 1.0])
-
-    def pts(a):
-        return None if a is None else a * np.array([-1.0, 1.0, 1.0])
-
-    R = quat_wxyz_to_matrix(cap.object_quat_wxyz)
-    return _replace(
-        cap,
-        global_orient=mirror_axis_angle(cap.global_orient),
-        hand_pose=mirror_axis_angle(cap.hand_pose),
-        wrist_pos=pts(cap.wrist_pos),
-        keypoints=pts(cap.keypoints),
-        object_pos=pts(cap.object_pos),
-        object_quat_wxyz=matrix_to_quat_wxyz(M @ R @ M),
-        mesh_vertices=pts(cap.mesh_vertices),
-        mesh_faces=cap.mesh_faces[:, ::-1].copy(),
-        up=M @ cap.up,
-        mirrored=True,
-    )
-
-
 def _rest_wrist(betas: np.ndarray, side: str) -> np.ndarray:
     """(3,) MANO's wrist joint J0 [m] at rest for ``betas`` (the exact model when
     ``$MANO_MODEL_DIR`` holds it, else the built-in skeleton's mean J0)."""
@@ -561,83 +422,3 @@ def _rest_wrist(betas: np.ndarray, side: str) -> np.ndarray:
 
     out = ManoLayer(side).forward_numpy(betas=betas[None], hand_pose=np.zeros((1, 45)))
     return out.keypoints[0, 0]
-
-
-def to_z_up(cap: Capture, where: str) -> Capture:
-    """Rotate the scene so that ``cap.up`` becomes +z, and check the table against it."""
-    Q = rotation_to_z_up(cap.up)
-    if not np.allclose(Q, np.eye(3)):
-
-        def pts(a):
-            return None if a is None else a @ Q.T
-
-        R = aa_to_matrix(cap.global_orient)
-        Ro = quat_wxyz_to_matrix(cap.object_quat_wxyz)
-        cap = _replace(
-            cap,
-            global_orient=matrix_to_aa(Q @ R),
-            wrist_pos=pts(cap.wrist_pos),
-            keypoints=pts(cap.keypoints),
-            object_pos=pts(cap.object_pos),
-            object_quat_wxyz=matrix_to_quat_wxyz(Q @ Ro),
-        )
-    if cap.table_height is not None:
-        check_table_height(cap, where)
-    return cap
-
-
-def object_points_world(cap: Capture, frame: int) -> np.ndarray:
-    """(V, 3) the mesh's vertices in the world at ``frame``."""
-    R = quat_wxyz_to_matrix(cap.object_quat_wxyz[frame])
-    return cap.mesh_vertices @ R.T + cap.object_pos[frame]
-
-
-TABLE_REST_TOLERANCE_M = 0.03
-"""The object's lowest point at the first frame may lie this far [m] from ``table_height``."""
-
-
-def check_table_height(cap: Capture, where: str) -> None:
-    """The object rests on the table at the first frame: its lowest point should sit at
-    ``table_height`` (within :data:`TABLE_REST_TOLERANCE_M`).
-
-    An object sunk into the table, or off it where another up axis would put it on it, means the
-    up axis or the table height is wrong: an error naming the axes that fit. An object above the
-    table with no axis fitting better starts on something else (another object): a warning.
-    """
-    pts = object_points_world(cap, 0)
-    gap = float(pts[:, 2].min() - cap.table_height)
-    if abs(gap) <= TABLE_REST_TOLERANCE_M:
-        return
-    # Which axis of the file would have put the object on the table?
-    Q = rotation_to_z_up(cap.up)
-    file_pts = pts @ Q  # back in the file's frame (pts = file @ Q.T)
-    fits = []
-    for axis in ("x", "y", "z", "-x", "-y", "-z"):
-        u = up_vector(axis)
-        if abs(float((file_pts @ u).min()) - cap.table_height) <= TABLE_REST_TOLERANCE_M:
-            fits.append(axis)
-    if gap > 0 and not fits:
-        log.warning(
-            "%s: at frame 0 the object's lowest point is %.3f m above the table: it starts on "
-            "something else",
-            where,
-            gap,
-        )
-        return
-    hint = (
-        f"; with up_axis {' or '.join(repr(a) for a in fits)} it would rest on it"
-        if fits
-        else "; no axis makes it rest there: check table_height (metres, along the up axis)"
-    )
-    raise ValidationError(
-        f"{where}: at frame 0 the object's lowest point is {gap:+.3f} m from table_height="
-        f"{cap.table_height:g} along the up axis {np.round(cap.up, 3).tolist()}: the object "
-        f"should rest on the table (is up_axis right?){hint}",
-        field="up_axis",
-    )
-
-
-def _replace(cap: Capture, **changes) -> Capture:
-    import dataclasses
-
-    return dataclasses.replace(cap, **changes)

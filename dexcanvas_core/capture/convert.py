@@ -25,7 +25,8 @@ import math
 
 import numpy as np
 
-from dexcanvas_core.capture.arrays import Capture, object_points_world
+from dexcanvas_core.capture.capture import Capture
+from dexcanvas_core.capture.world import object_points_world
 from dexcanvas_core.rotations import quat_wxyz_to_aa
 from dexcanvas_core.table import DEFAULT_TABLE, Table
 from dexcanvas_core.trajectory import HandTrack, ObjectMove, ObjectTrack, Trajectory

@@ -27,7 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dexcanvas_core.capture.arrays import Capture, capture_from_arrays
+from dexcanvas_core.capture.arrays import capture_from_arrays
+from dexcanvas_core.capture.capture import Capture
 from dexcanvas_core.capture.convert import DEFAULT_FPS, capture_to_trajectory
 from dexcanvas_core.errors import DatasetError, UnknownNameError, ValidationError
 from dexcanvas_core.taxonomy.object_lookup import catalogue_spec
