@@ -188,8 +188,8 @@ def run_fit_command(args: argparse.Namespace) -> dict:
 
 
 def _sim_config(args: argparse.Namespace):
+    from dexcanvas_core.sim.mpc import MPCConfig
     from dexcanvas_core.sim.pipeline import SimConfig
-    from dexcanvas_core.sim.tracker import MPCConfig
 
     return SimConfig(
         tracker=args.tracker,

@@ -24,6 +24,7 @@ import mujoco
 import numpy as np
 
 from dexcanvas_core.rotations import aa_to_quat_wxyz
+from dexcanvas_core.sim.mpc import MPCConfig, OpenLoop, SamplingMPC, track
 from dexcanvas_core.sim.scene import (
     OBJECT_ANCHOR,
     OBJECT_BODY,
@@ -33,14 +34,7 @@ from dexcanvas_core.sim.scene import (
     add_table,
 )
 from dexcanvas_core.sim.signal import moving_average
-from dexcanvas_core.sim.tracker import (
-    MPCConfig,
-    OpenLoop,
-    SamplingMPC,
-    TrackingConfig,
-    TrackingEnv,
-    track,
-)
+from dexcanvas_core.sim.tracker import TrackingConfig, TrackingEnv
 from dexcanvas_core.table import DEFAULT_TABLE, Table, table_of
 from dexcanvas_core.trajectory import CONTACT_PARTS
 from retarget.errors import RetargetError

@@ -285,8 +285,8 @@ HUMAN_REPLAY_SEED = 1
 def human_sim_config(object_id: str, tracker: str = "mpc", mpc_seed: int | None = None):
     """The force pipeline's ``SimConfig`` for one human simulation with ``object_id``: the
     defaults, or the sampling MPC at ``mpc_seed`` (the human replay)."""
+    from dexcanvas_core.sim.mpc import MPCConfig
     from dexcanvas_core.sim.pipeline import SimConfig
-    from dexcanvas_core.sim.tracker import MPCConfig
 
     if mpc_seed is None:
         return SimConfig(tracker=tracker, object_id=object_id)

@@ -543,7 +543,7 @@ def test_refinement_backtracking_resumes_exactly_from_its_checkpoints():
 
     from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.loaders.selection import load_demonstration
-    from dexcanvas_core.sim.tracker import SamplingMPC
+    from dexcanvas_core.sim.mpc import SamplingMPC
     from retarget.hands import get_hand
     from retarget.refine import RefineConfig, _checkpoint, _restore, _tracking_env, refine
     from retarget.retargeter import Retargeter

@@ -24,6 +24,7 @@ from dexcanvas_core.sim.hand import (
     joint_angles_to_mano,
     mano_to_joint_angles,
 )
+from dexcanvas_core.sim.mpc import MPCConfig, SamplingMPC, track
 from dexcanvas_core.sim.pipeline import SimConfig, prepare, simulate
 from dexcanvas_core.sim.reference import build_reference, keypoint_residual, lowpass_reference
 from dexcanvas_core.sim.scene import OBJECT_BODY, add_object, build_scene
@@ -33,13 +34,7 @@ from dexcanvas_core.sim.synthesis import (
     apply_pose_perturbation,
     synthesize_one,
 )
-from dexcanvas_core.sim.tracker import (
-    ACTION_DIM,
-    MPCConfig,
-    SamplingMPC,
-    TrackingEnv,
-    track,
-)
+from dexcanvas_core.sim.tracker import ACTION_DIM, TrackingEnv
 from dexcanvas_core.taxonomy import OBJECTS
 
 G = 9.81

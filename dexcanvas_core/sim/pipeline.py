@@ -37,6 +37,7 @@ from dexcanvas_core.mano.skeleton import HandSkeleton
 from dexcanvas_core.sim.diagnosis import failure_diagnosis, wrist_rotations
 from dexcanvas_core.sim.forces import contacts_from_frames, finger_force_series
 from dexcanvas_core.sim.hand import FINGER_HINGES, urdf_dof_26
+from dexcanvas_core.sim.mpc import MPCConfig, OpenLoop, ResidualTracker, SamplingMPC, track
 from dexcanvas_core.sim.reference import (
     Reference,
     build_reference,
@@ -47,15 +48,7 @@ from dexcanvas_core.sim.resize import adapt_reference_to_size
 from dexcanvas_core.sim.scene import PhysicsSettings, SimScene, build_scene
 from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S, moving_average
 from dexcanvas_core.sim.support import hold_until_frame
-from dexcanvas_core.sim.tracker import (
-    MPCConfig,
-    OpenLoop,
-    ResidualTracker,
-    SamplingMPC,
-    TrackingConfig,
-    TrackingEnv,
-    track,
-)
+from dexcanvas_core.sim.tracker import TrackingConfig, TrackingEnv
 from dexcanvas_core.table import table_of
 from dexcanvas_core.trajectory import FORCE_GROUPS, Trajectory
 
