@@ -179,56 +179,31 @@ class RetargetConfig:
     the error is the link point's offset ``o`` along the human contact's normal plus
     ``φ(d − o)``, ``d`` the link–object distance, ``φ(x) = x²/h`` below ``h`` and ``x`` beyond
     (``o + φ ≈ d`` once the link is more than ``h`` farther from the object than from the
-    tangent plane); None: always the offset. The offset is zero anywhere in the tangent plane
-    at the human's point, which a link can be in far off a curved object: a finger lying
-    straight over an apple, level with the human's contact on its side (generated
-    sphere_4_finger on an 85 mm ball: Inspire's index and ring distal links 16 and 23 mm off
-    the ball with the offset alone, within 1 mm with ``h`` = 5 mm). On flat faces the two
-    agree, and the offset brings a link in along the human's normal, where the distance pulls
-    it onto whatever part of the object is nearest: the distance wherever it exceeds the
-    offset left Shadow's thumb on the built-in cube2/lateral_pinch on the cube's other edge,
-    16 mm from the human's pad point (1.8 mm with the offset; so with ``h`` = 5 mm, not with
-    2 mm). A switch from the offset to the distance at ``h`` instead of ``φ`` made the
-    iterations flip between the two rows (Shadow, the ball: 1.7 QP solves per frame instead
-    of 1.1)."""
+    tangent plane); None: always the offset. The offset alone is zero anywhere in the tangent
+    plane at the human's point, which a link can be in far off a curved object; on flat faces
+    the two agree. Default 5 mm; the measurements behind it: CHANGELOG.md."""
     w_closing: float = 50.0
     """Weight [per m²] of the closing terms: where the human touches the object with more than
     one phalanx of a finger (a power grasp's distal and middle phalanges), the robot links
     standing for the others than the contact's are pulled to within ``closing_slack_m`` of
     the surface too (their signed distance to the object beyond it, from 5 cm in; weight
     ramped in over ``closing_ramp_s``), so that the finger wraps the object as the human's
-    does. 0: only the contact's link. Measured on the generated sphere_4_finger on an 85 mm
-    ball, Inspire: the proximal links' median distance to the ball 4.8–6.3 mm without, 3.6–4.7
-    mm with."""
+    does. 0: only the contact's link."""
     closing_slack_m: float = 0.004
     """A closing link within this [m] of the object is left where it is: its term pulls it no
-    nearer, and never pushes it out (the non-penetration rows do). Pulled nearer, Shadow's
-    thumb on the built-in cube2/lateral_pinch turned about its pad as it landed (its proximal
-    link on the cube's edge) and the pad slid down the cube's other edge, 15.6 mm from the
-    human's pad point with 3 mm, 1.8 mm with 4 mm (as without closing terms)."""
+    nearer, and never pushes it out (the non-penetration rows do)."""
     closing_ramp_s: float = 0.5
-    """A closing term's weight rises from 0 to ``w_closing`` over this long [s] after its
-    human phalanx began to touch: pulled in with the contact's onset, a link can turn the
-    finger about its contact as it lands. Shadow's thumb on the built-in cube2/lateral_pinch
-    (its pad the contact, its proximal link on the cube's edge): 15.6 mm from the human's pad
-    point at once and with 0.25 s, 1.8 mm with 0.5 s (as without closing terms; with the
-    4 mm ``closing_slack_m``, a 3 mm slack turns it even with 0.5 s). The generated
-    sphere_4_finger's wraps (Inspire) are the same at once and with 0.5 s."""
+    """A closing term's weight rises from 0 to ``w_closing`` over this long [s] after its human
+    phalanx began to touch (pulled in at the contact's onset, a link can turn the finger about
+    its contact as it lands)."""
     grip_surface_normals: bool = True
     """The grip (``grip="wrench"``; not force matching, whose forces are the human's own
     vectors) presses each contacting robot link along the object's normal where that link
     touches (the direction in which the link–object distance grows at its nearest point) when
     that is within 45° of the human contact's normal, and its friction cone is about that
-    normal (``Retargeter._surface_normals``). Where the robot's link meets the object
-    elsewhere than the human's phalanx (a larger hand on a ball: its fingertips on the upper
-    side, the human's on the equator) a push along the human's normal slides the link over the
-    surface. Measured on a generated precision_sphere on an 85 mm ball: Ability dropped it
-    with the human's normals (18.8 cm) and holds it with these (1.7 cm); Inspire drops it
-    either way (21.4, 12.1 cm). Without the 45° bound (links on a cube's edge pressing
-    diagonally), with the contact terms' distance everywhere (``contact_hover_m`` 0): strict
-    re-simulation success 36 against 49 of 64 runs (16 pairs × Shadow, Allegro, Inspire,
-    Ability). Force matching with the robot's normals: Allegro on a force-annotated
-    cube2/tripod pressed 0.27 of the human's force instead of 0.99."""
+    normal (``Retargeter._surface_normals``); False: the human contact's normal. Where the
+    robot's link meets the object elsewhere than the human's phalanx (a larger hand on a
+    ball), a push along the human's normal slides the link over the surface."""
     w_posture: float = 1e-4
     w_smooth: float = 0.05
     damping: float = 1e-5
@@ -1260,8 +1235,7 @@ class Retargeter:
         # (``grip_surface_normals``), which is not the human's where the robot's link meets
         # the object elsewhere (a larger hand's fingertip on an apple's upper side, the
         # human's on its equator). Force matching keeps the human's normals: its forces are
-        # the human's own vectors, their cones the human's (with the robot's normals Allegro
-        # on a force-annotated cube2/tripod pressed 0.27 of the human's force, not 0.99).
+        # the human's own vectors, their cones the human's.
         normals = normals.copy()
         if self.cfg.grip_surface_normals and fm["mode"] != "human":
             normals[idx] = self._surface_normals(q, idx, normals[idx])
@@ -1474,9 +1448,7 @@ class Retargeter:
         :attr:`COUPLING_TOLERANCE`. The prediction is clipped to the joint ranges joint by
         joint, so a driving joint stopped at its limit while the joint it drives went on
         breaks their coupling; the QP's equality rows then ask more than one iterate's
-        velocity bound allows to undo it, and the frame's QP is infeasible (Ability, a
-        generated cuboid1/extension_type with 8 mm of object pose noise: couplings off by
-        0.25 and 0.20 rad against a 0.17 rad bound, the retargeting stopped with an error)."""
+        velocity bound allows to undo it, and the frame's QP is infeasible."""
         c = self._coupling
         if not c or not c.rows:
             return False
