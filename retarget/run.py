@@ -158,16 +158,9 @@ def load_subject(cfg: RunConfig):
     Raises:
         RetargetError: neither ``pair`` nor ``dataset``, or no such demonstration.
     """
-    from dexcanvas_core.capture import use_dataset_objects
     from dexcanvas_core.errors import DexCanvasError
     from dexcanvas_core.loaders.selection import load_row, subject_of
-    from dexcanvas_core.taxonomy import Pair
 
-    if cfg.dataset is not None:  # an imported dataset's objects, before any name is looked up
-        try:
-            use_dataset_objects(cfg.dataset)
-        except DexCanvasError as e:
-            raise RetargetError(str(e)) from e
     if cfg.pair is None:
         if cfg.dataset is None:
             raise RetargetError(
@@ -175,11 +168,11 @@ def load_subject(cfg: RunConfig):
                 "--index I"
             )
         try:
-            traj = load_row(cfg.dataset, cfg.index)
+            traj = load_row(cfg.dataset, cfg.index)  # puts the dataset's objects in use
             return traj, subject_of(traj), None
         except DexCanvasError as e:
             raise RetargetError(str(e)) from e
-    pair = Pair.parse(cfg.pair)
+    pair = _parse_pair(cfg)
     traj, substituted = _load_demonstration(cfg, pair)
     return traj, pair, substituted
 
@@ -673,7 +666,8 @@ def run_retarget(cfg: RunConfig) -> dict:
     # The demonstration first: on first use it is built, and the terminal says so at once;
     # the solver's modules compile their numba kernels on a machine's first import (seconds).
     traj, pair, substituted = load_subject(cfg)
-    check_pair(hand, pair.manipulation_type)
+    if cfg.pair is None:  # a row's own type, known only now
+        check_pair(hand, pair.manipulation_type)
     traj = time_scaled(traj, cfg.time_scale)
     from dexcanvas_core.demos.geometry import object_geometry, object_record
     from retarget.retargeter import Retargeter

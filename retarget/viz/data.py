@@ -268,7 +268,7 @@ def load_human(
 ) -> Trajectory:
     """The human demonstration of ``pair`` in ``dataset`` (``None`` or ``'built-in'``: the
     built-in demonstrations), by ``uuid`` when given, else the ``index``-th of the pair; with a
-    dataset and no pair (or a row of a type the taxonomy does not know), the row ``index``."""
+    dataset and no pair, the row ``index``."""
     from dexcanvas_core.capture import use_dataset_objects
     from dexcanvas_core.io import open_dataset
     from dexcanvas_core.loaders.selection import select_rows
@@ -286,7 +286,7 @@ def load_human(
         path = Path(dataset)
         use_dataset_objects(path)
     ds = open_dataset(path)
-    if not builtin and (uuid is not None or pair is None or pair.endswith("/unknown")):
+    if not builtin and (uuid is not None or pair is None):
         sel = select_rows(ds)
         if uuid is not None:
             if uuid not in sel.uuids:
