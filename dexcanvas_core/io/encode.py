@@ -226,12 +226,17 @@ def _hands_array(trajs: list[Trajectory], typ: pa.ListType) -> pa.Array:
                     children[f.name].append(_list_of([_per_frame(vals, f.type)], f.type))
                 else:
                     children[f.name].append(_extra(t, f"hands[{j}].{f.name}", f.type))
-        arrays = {
-            k: pa.concat_arrays(v) if v else pa.array([], type=st.field(k).type)
-            for k, v in children.items()
-        }
-        per_row.append(_struct(arrays, st))
+        per_row.append(_struct_of_children(children, st))
     return _list_of(per_row, typ)
+
+
+def _struct_of_children(children: dict[str, list[pa.Array]], st: pa.StructType) -> pa.Array:
+    """One row's struct array from its children's per-element arrays (empty ones typed)."""
+    arrays = {
+        k: pa.concat_arrays(v) if v else pa.array([], type=st.field(k).type)
+        for k, v in children.items()
+    }
+    return _struct(arrays, st)
 
 
 def _objects_array(trajs: list[Trajectory], typ: pa.ListType) -> pa.Array:
@@ -246,11 +251,7 @@ def _objects_array(trajs: list[Trajectory], typ: pa.ListType) -> pa.Array:
                     children[f.name].append(_list_of([_per_frame(vals, f.type)], f.type))
                 else:
                     children[f.name].append(_extra(t, f"objects[{j}].{f.name}", f.type))
-        arrays = {
-            k: pa.concat_arrays(v) if v else pa.array([], type=st.field(k).type)
-            for k, v in children.items()
-        }
-        per_row.append(_struct(arrays, st))
+        per_row.append(_struct_of_children(children, st))
     return _list_of(per_row, typ)
 
 
