@@ -18,7 +18,7 @@ variants stay empty.
 Human replay (``--no-human-replay`` to skip; ``mpc`` only): every (pair, object) the force
 pipeline reproduced is simulated a second time with another seed of its sampling MPC
 (``HUMAN_REPLAY_SEED``), and the replay's per-finger forces are scored against the first
-simulation's exactly as a robot's are (``retarget.run.human_replay_metrics``). The human's
+simulation's exactly as a robot's are (``retarget.metrics.human_replay_metrics``). The human's
 forces are one sample of a stochastic tracker: a robot matched to that sample cannot be
 expected to correlate with it better than another equally valid sample does, so the replay
 is the force correlation's ceiling, reported on the same runs and fingers as each variant's
@@ -27,7 +27,7 @@ parity the human hand model itself reaches (``human_heavy_vs_light``). It double
 pipeline's CPU time (cached with ``--human-cache`` like the first simulations).
 
 Per hand (``--hands``, default every registered hand; a hand skips pairs it cannot perform,
-``retarget.run.check_pair``) and per (pair, object), five variants side by side:
+``retarget.pipeline.check_pair``) and per (pair, object), five variants side by side:
 
 * **(a) dex-retargeting** — its position retargeting (``retarget.baselines``, free wrist unless
   ``--dex-wrist fixed``) on the same scaled keypoint targets, re-simulated on its ``q``;
@@ -39,7 +39,7 @@ Per hand (``--hands``, default every registered hand; a hand skips pairs it cann
   inferred from its geometry as in (c), the human's per-finger forces from its records →
   force-distribution QP → ``K⁻¹Jᵀf`` offsets),
   re-simulated on ``q_command`` with the force pipeline's contacts
-  (``retarget.run.FORCE_CONTACT_TIMECONST``, 20 ms: the default contacts (a)–(c) have too),
+  (``retarget.pipeline.FORCE_CONTACT_TIMECONST``, 20 ms: the default contacts (a)–(c) have too),
   then force-calibrated as ``retarget run --forces`` does (``retarget.force_calibration``,
   ``--calibrate-iterations``, default 10; 0: the planned commands): the row is the chosen
   iterate's, with the planned commands' success in ``planned_success``;
@@ -52,14 +52,14 @@ Measured per run (``Resimulator``: the hand's own position servos, object free o
 
 * strict success (no frame with object position error > 5 cm) and mean-error success (mean
   < 10 cm and < 0.5 rad); mean object position [cm] and rotation [°] errors;
-* force correlation — ``retarget.run.force_metrics``: per corresponding finger, the correlation
+* force correlation — ``retarget.metrics.force_metrics``: per corresponding finger, the correlation
   of the human's and the re-simulated robot's contact-force magnitudes, averaged over fingers
   (runs with human forces only; the human side is (d)'s ``human_force``), two ways: over the
   whole demonstration (the force *profile*, on/off timing included) and over only the frames
   where either finger touches (how the force varies while in contact); over the fingers the
   human loaded (> 0.05 N on more than 2 frames), a robot finger that never presses there
   scoring 0; and the whole-demonstration one over the load-bearing fingers only (those
-  carrying at least ``retarget.run.LOAD_BEARING_SHARE`` of the hand's mean force: the
+  carrying at least ``retarget.force_scores.LOAD_BEARING_SHARE`` of the hand's mean force: the
   breakdown that separates the grip from light touches; the target is checked on all);
 * object force error — mean over frames where the human touches of ‖Σ robot contact forces −
   Σ human contact forces‖ [N] (the force part of the hand's wrench on the object; the
@@ -135,7 +135,12 @@ from _common import (
 from force_pipeline import _init_worker, _one_thread_env
 
 from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S
-from retarget.run import FORCE_CONTACT_TIMECONST, HUMAN_REPLAY_SEED, RunConfig, human_sim_config
+from retarget.pipeline import (
+    FORCE_CONTACT_TIMECONST,
+    HUMAN_REPLAY_SEED,
+    RunConfig,
+    human_sim_config,
+)
 
 DEFAULT_OUT = Path(__file__).parent / "results" / "force_preservation.json"
 NOT_REQUESTED = "not requested (--variants)"
@@ -219,7 +224,7 @@ class BenchConfig:
     human_replay: bool = True
     """Simulate every (pair, object) a second time with another seed of the force pipeline's
     sampling MPC (``HUMAN_REPLAY_SEED``) and score its per-finger forces against the first's as the
-    robots' are (``retarget.run.human_replay_metrics``): the ceiling of the force correlation
+    robots' are (``retarget.metrics.human_replay_metrics``): the ceiling of the force correlation
     (``--no-human-replay``: skip; never with the deterministic ``open_loop`` tracker)."""
 
     def replays(self) -> bool:
@@ -333,14 +338,14 @@ FORCE_KEYS = (
     "object_force_error_contact_frames_mean_n", "object_force_error_pct_weight",
     "contact_precision", "contact_recall",
 )  # fmt: skip
-"""A row's force columns (:func:`retarget.run.force_metrics`, + % of the weight)."""
+"""A row's force columns (:func:`retarget.metrics.force_metrics`, + % of the weight)."""
 
 
 def _force_columns(human_force, robot_d, sim_res, human, retargeter, variant: str) -> dict:
     """``force_metrics`` of one variant's re-simulation against the human's forces: every
     variant is compared with the human per-finger forces mapped onto this hand's fingers
     (``human_force``, ``Retargeter.human_finger_forces``; (d)'s ``robot_d.human_force``)."""
-    from retarget.run import force_metrics
+    from retarget.metrics import force_metrics
 
     robot = robot_d
     if variant != "d":  # only the human side is read from the robot (no force QP ran)
@@ -382,8 +387,8 @@ def _hand_job(args) -> list[dict]:
     from dexcanvas_core.sim.pipeline import GRAVITY
     from retarget.baselines import KinematicMetrics, measure_trajectory
     from retarget.hands import get_hand
+    from retarget.metrics import refined_force_metrics
     from retarget.retargeter import RetargetConfig, Retargeter
-    from retarget.run import refined_force_metrics
     from retarget.validate import Resimulator, ValidateConfig
 
     base, traj, human, dex_wrist, computed, overrides, refine_overrides, n_calibrate = args
@@ -686,10 +691,10 @@ def human_heavy_vs_light(human: list[dict]) -> dict:
 
 
 def replay_record(first, res: dict) -> dict:
-    """A human simulation's ``replay`` entry: ``retarget.run.human_replay_outcome`` of the
+    """A human simulation's ``replay`` entry: ``retarget.metrics.human_replay_outcome`` of the
     replay (``res``: a :func:`_human_sim` result at ``HUMAN_REPLAY_SEED``) against the first
     simulation's trajectory ``first``, with its CPU time, cache flag and error."""
-    from retarget.run import human_replay_outcome
+    from retarget.metrics import human_replay_outcome
 
     rec = res["record"]
     return {
@@ -718,9 +723,9 @@ def replay_ceiling(rows: list[dict], human: list[dict], variant: str = "d") -> d
     """The human replay's force correlations on the runs where ``variant`` succeeded, next to
     the variant's own on the same runs: for each such run with a scored replay, the replay's
     per-finger scores over the fingers the run scores (its hand's, those the human loaded),
-    with the run's load shares (``retarget.run.correlation_means``); then means over runs.
+    with the run's load shares (``retarget.force_scores.correlation_means``); then means over runs.
     ``runs`` counts the runs compared."""
-    from retarget.run import correlation_means
+    from retarget.force_scores import correlation_means
 
     replays = _replays(human)
     ours, ceiling = [], []
@@ -766,9 +771,9 @@ def _bins(edges_m: tuple[float, ...]) -> list[tuple[str, float, float]]:
 def correlation_by_reach(rows: list[dict], human: list[dict]) -> dict:
     """Whole-clip force correlation of single fingers, (d) and (e)'s successful runs pooled
     finger by finger, binned by how close the kinematic plan brings the finger to the human's
-    contact (``contact_reach_m``, :data:`retarget.run.REACH_M`), next to the human replay's on
-    the same fingers where the run has one. Fingers without a reach (no contact target where
-    the human loads) are their own bin. ``{variant: [{"bin", "fingers", "correlation",
+    contact (``contact_reach_m``, :data:`retarget.force_scores.REACH_M`), next to the human
+    replay's on the same fingers where the run has one. Fingers without a reach (no contact
+    target where the human loads) are their own bin. ``{variant: [{"bin", "fingers", "correlation",
     "replay_fingers", "replay_correlation"}]}``."""
     replays = _replays(human)
     out = {}
@@ -1080,7 +1085,7 @@ def variants_table(title: str, agg: dict, ceiling: dict | None = None):
     the human replay's force correlations on (d)'s successful runs."""
     from rich.table import Table
 
-    from retarget.run import LOAD_BEARING_SHARE
+    from retarget.force_scores import LOAD_BEARING_SHARE
 
     t = Table(
         title=title,
@@ -1443,7 +1448,7 @@ def run_jobs(cfg: BenchConfig, demos: list, plans: list, hands: list, console):
     that reproduced its demonstration is simulated again at ``HUMAN_REPLAY_SEED`` and its record
     gets a ``replay`` (:func:`replay_record`)."""
     from retarget.errors import RetargetError
-    from retarget.run import check_pair
+    from retarget.pipeline import check_pair
 
     performable = {}
     skipped = []
@@ -1708,21 +1713,23 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         "definitions": {
             "success": "Resimulator strict rule (no frame with object error > 5 cm)",
             "success_loose": "mean object error < 10 cm and < 0.5 rad",
-            "force_correlation_mean": "retarget.run.force_metrics: mean over corresponding "
+            "force_correlation_mean": "retarget.metrics.force_metrics: mean over corresponding "
             "fingers the human loaded (> 0.05 N on more than 2 frames) of the correlation of "
             "human and re-simulated robot contact-force magnitude profiles (frames where either "
             "exceeds 0.05 N); 0 for a robot finger that never presses",
             "force_profile_correlation_mean": "the same correlation over every frame of the "
             "demonstration (the force profile, contact on/off timing included)",
             "*_load_bearing": "the same means over the fingers whose mean human force is at "
-            "least retarget.run.LOAD_BEARING_SHARE of the mapped fingers' summed mean force",
+            "least retarget.force_scores.LOAD_BEARING_SHARE of the mapped fingers' summed "
+            "mean force",
             "force_profile_correlation_mean_reached": "the whole-clip mean over the fingers "
             "whose contact_reach_m (the median distance from the robot finger to the human's "
             "contact point in (d)'s plan, over the frames the human finger loads) is at most "
-            "retarget.run.REACH_M; correlation_by_reach pools single fingers by reach",
+            "retarget.force_scores.REACH_M; correlation_by_reach pools single fingers by reach",
             "force_profile_correlation_mean_smoothed": "the whole-clip mean with both force "
             "profiles moving-averaged over the demonstration's bandwidth first "
-            f"(retarget.run.profile_band_frames: the force pipeline's {1e3 * CAPTURE_SMOOTH_S:.0f}"
+            "(retarget.force_scores.profile_band_frames: the force pipeline's "
+            f"{1e3 * CAPTURE_SMOOTH_S:.0f}"
             " ms capture smoothing; "
             "the robots' contact chatter above it is not part of the human's profile)",
             "object_force_error_mean_n": "mean over frames where the human touches of |sum of "
@@ -1746,7 +1753,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
             "human_replay": "the force pipeline run again on the same (pair, object) with "
             f"MPC seed {HUMAN_REPLAY_SEED} (the first: 0); replay.force_* score its per-finger "
             "forces against the first simulation's as force_metrics scores a robot's "
-            "(retarget.run.human_replay_metrics)",
+            "(retarget.metrics.human_replay_metrics)",
             "human_replay_ceiling": "replay_ceiling: over a variant's successful runs with a "
             "scored replay, the replay's correlations on the fingers each run scores (and the "
             "run's load shares), next to the variant's own on the same runs",

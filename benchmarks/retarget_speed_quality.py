@@ -40,7 +40,7 @@ Measured per run:
 Pairs: ``--n-pairs`` feasible pairs of the built-in demonstrations
 (``dexcanvas_core.demos``), spread evenly over the four groups (power, intermediate,
 precision, in-hand) by a deterministic round robin over manipulation types and objects; a
-hand skips pairs it cannot perform (``retarget.run.check_pair``; counted). Prints a table per
+hand skips pairs it cannot perform (``retarget.pipeline.check_pair``; counted). Prints a table per
 hand and an overall table with the targets, and writes JSON (per-run rows and aggregates).
 
     python benchmarks/retarget_speed_quality.py                 # 20 pairs, every hand
@@ -383,7 +383,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
     from dexcanvas_core.taxonomy import GROUPS
     from retarget.baselines import DexRetargetingBaseline, DexRetargetingConfig
     from retarget.hands import available_hands, get_hand
-    from retarget.run import check_pair
+    from retarget.pipeline import check_pair
 
     # Tables are wider than the 80 columns rich assumes off a terminal.
     console = console or Console(width=None if sys.stdout.isatty() else 120)

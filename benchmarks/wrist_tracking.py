@@ -143,8 +143,8 @@ def demo_rows(hands, pair: str, repeats: int, console) -> list[dict]:
     from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.table import table_of
     from dexcanvas_core.taxonomy import Pair
+    from retarget.pipeline import check_pair
     from retarget.retargeter import Retargeter
-    from retarget.run import check_pair
     from retarget.validate import Resimulator, ValidateConfig
     from retarget.viz.data import load_human
 

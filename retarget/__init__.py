@@ -1,11 +1,76 @@
 """retarget: the robot side of dexcanvas-retarget.
 
-QP retargeting of human demonstrations onto robot hands, re-simulation validation, metrics and
-visualisation. Builds on ``dexcanvas_core`` (data flows one way: this package imports it, never
-the reverse).
+QP retargeting of human demonstrations onto robot hands, re-simulation validation, force
+matching and calibration, physics refinement, metrics and visualisation. Builds on
+``dexcanvas_core`` (data flows one way: this package imports it, never the reverse).
+
+The names a user needs are importable from here (loaded on first use, so ``import retarget``
+stays cheap):
+
+>>> import retarget
+>>> hand = retarget.get_hand("allegro")
+>>> hand.name, len(hand.fingers)
+('allegro', 4)
+
+One demonstration end to end, in memory (``retarget run`` adds the files and the summary):
+
+>>> from dexcanvas_core import load_demonstration
+>>> human = load_demonstration("cube2/tripod").slice(0, 30)  # the first quarter second
+>>> result = retarget.retarget_demonstration(human, "cube2/tripod", "shadow")
+>>> result.robot.q_command.shape[0], result.sim.success
+(30, True)
 """
+
+from __future__ import annotations
+
+import importlib
 
 from retarget.errors import RetargetError
 
 __version__ = "0.1.0"
-__all__ = ["RetargetError"]
+
+_EXPORTS = {
+    # hands
+    "get_hand": "retarget.hands",
+    "available_hands": "retarget.hands",
+    "register": "retarget.hands",
+    "HandModel": "retarget.hands",
+    # retargeting
+    "Retargeter": "retarget.retargeter",
+    "RetargetConfig": "retarget.retargeter",
+    "RobotTrajectory": "retarget.retargeter",
+    "retarget_keypoints": "retarget.keypoint_input",
+    # re-simulation, force calibration, refinement
+    "Resimulator": "retarget.validate",
+    "ValidateConfig": "retarget.validate",
+    "ForceCalibrationConfig": "retarget.force_calibration",
+    "calibrate_forces": "retarget.force_calibration",
+    "RefineConfig": "retarget.refine",
+    "refine": "retarget.refine",
+    # the pipeline and its outputs
+    "RunConfig": "retarget.pipeline",
+    "PipelineResult": "retarget.pipeline",
+    "retarget_demonstration": "retarget.pipeline",
+    "run_pipeline": "retarget.pipeline",
+    "run_retarget": "retarget.run",
+    "run_metrics": "retarget.metrics",
+    "force_metrics": "retarget.metrics",
+    "write_run": "retarget.outputs",
+    # batched FK for learning
+    "TorchHandFK": "retarget.torch_fk",
+}
+
+__all__ = ["RetargetError", *_EXPORTS]
+
+
+def __getattr__(name: str):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'retarget' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

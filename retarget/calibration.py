@@ -126,7 +126,7 @@ def calibration_demos(
     pair on, each cropped to ``max_frames`` (``Trajectory.crop``, as the benchmarks do)."""
     from dexcanvas_core.demos import feasible_pairs, generate_demo, spread_pairs
     from dexcanvas_core.demos import operator as operator_by_name
-    from retarget.run import check_pair
+    from retarget.pipeline import check_pair
 
     if n_pairs < 1:
         raise RetargetError("calibration needs at least one demonstration pair")

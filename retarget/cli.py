@@ -221,7 +221,7 @@ class RunAndSnapshotConfig:
     """``retarget run --snapshot``: the run, then stills of it into its directory."""
 
     run: object
-    """The ``retarget.run.RunConfig``."""
+    """The ``retarget.pipeline.RunConfig``."""
     renderer: str = "auto"
 
 
@@ -233,7 +233,7 @@ def _run_config(args: argparse.Namespace):
 
 
 def _plain_run_config(args: argparse.Namespace):
-    from retarget.run import RunConfig
+    from retarget.pipeline import RunConfig
 
     return RunConfig(
         hand=args.hand,

@@ -7,7 +7,7 @@ blocked by the object where the plan put it. Replayed open loop, the object drif
 planned pose, a finger meets the surface early or late, the contact is compliant, and the
 forces the servos press with differ from the plan's (on the force-preservation benchmark, a
 light touch pressed at 0.1–4.5 mm from the simulated object reproduces its human profile at
-0.3; ``retarget.run.LOAD_BEARING_SHARE``).
+0.3; ``retarget.force_scores.LOAD_BEARING_SHARE``).
 
 This stage closes that loop the way iterative learning control does: it re-simulates the
 commands, measures each finger's force ``R_f(t)`` against the human's ``H_f(t)``, and adds
@@ -20,16 +20,8 @@ human's forces best (:func:`match_error`: magnitude and profile) among those tha
 object (strict success), else the input commands, so calibration never turns a success into a
 failure.
 
-Measured 2026-12-07 on the force-preservation benchmark (five-finger hands, (d), 112 runs, 76
-lifted; every iterate of 12 re-simulated and logged, then each rule applied to the same
-iterates): choosing by the force error alone, 6 iterates, gives whole-clip correlation 0.793
-and force error 0.330 (the means over the lifted runs); by :func:`match_error`, 0.804 and
-0.333; with 10 iterates 0.799 / 0.319 by the force error and 0.810 / 0.322 by
-:func:`match_error` (the default); 12 iterates add 0.002. More iterates never lose a lift, since
-the first ones are the same and the chosen one keeps the object. The choice fits the sample of
-the human's forces it is given: against a second sample of the same demonstrations (the force
-pipeline at another MPC seed, 74 of the runs) the chosen iterates correlate at 0.715 before and
-0.720 now, against the given sample 0.799 and 0.816.
+The defaults (10 iterates, chosen by :func:`match_error`) and the measurements behind them
+are in ``docs/method.md`` (force calibration).
 """
 
 from __future__ import annotations
@@ -44,7 +36,7 @@ import numpy as np
 from dexcanvas_core.sim.signal import moving_average
 from retarget.errors import RetargetError
 from retarget.force_matching import servo_gains, squeeze_offsets
-from retarget.run import correlation_means, finger_force_profiles
+from retarget.force_scores import correlation_means, finger_force_profiles
 
 
 @dataclass(frozen=True)
@@ -155,7 +147,7 @@ def force_error(H: np.ndarray, R: np.ndarray) -> float | None:
 def profile_correlation(H: np.ndarray, R: np.ndarray) -> float | None:
     """The mean over the fingers the human loads of the whole-clip correlation of the robot's
     force magnitudes with the human's (``force_profile_correlation_mean`` of
-    ``retarget.run.force_metrics``, which scores the chosen iterate; ``H``, ``R``: (T, F, 3)
+    ``retarget.metrics.force_metrics``, which scores the chosen iterate; ``H``, ``R``: (T, F, 3)
     [N] or (T, F) magnitudes); ``None`` when the human loads no finger."""
     Hn, Rn = _magnitudes(H), _magnitudes(R)
     per = finger_force_profiles(Hn, Rn, [str(i) for i in range(Hn.shape[1])])
@@ -168,7 +160,7 @@ def match_error(force_error: float | None, profile_correlation: float | None) ->
     (:func:`profile_correlation`), both 0 for a perfect match; ``inf`` when the human loads no
     finger. The force error alone is dominated by the fingers that carry the load, so a light
     touch pressing at the wrong moments barely moves it; the correlation weighs every loaded
-    finger alike (module doc: measured)."""
+    finger alike (``docs/method.md``, force calibration)."""
     if force_error is None:
         return np.inf
     return float(force_error + 1.0 - (profile_correlation or 0.0))

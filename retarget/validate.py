@@ -85,7 +85,7 @@ class ValidateConfig:
     """Put the table under the object (the one given to :class:`Resimulator`)."""
     contact_timeconst: float | None = None
     """Override every contact's ``solref`` time constant [s] (force matching: the force
-    pipeline's, ``retarget.run.FORCE_CONTACT_TIMECONST``)."""
+    pipeline's, ``retarget.pipeline.FORCE_CONTACT_TIMECONST``)."""
     wrist_driver: str = WRIST_DRIVERS[0]
     """What carries the wrist along its command (:mod:`retarget.wrist_drive`):
     ``computed_torque`` (force-limited, velocity and acceleration fed forward) or ``servo``

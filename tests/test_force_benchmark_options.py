@@ -25,7 +25,7 @@ def traj():
 def test_calibration_iterations_default_as_retarget_run_forces():
     """(d) is calibrated as ``retarget run --forces`` is: the same number of iterates."""
     from retarget.force_calibration import ForceCalibrationConfig
-    from retarget.run import RunConfig
+    from retarget.pipeline import RunConfig
 
     n = ForceCalibrationConfig().iterations
     assert fp.BenchConfig.calibrate_iterations == RunConfig.calibrate_iterations == n

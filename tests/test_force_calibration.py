@@ -140,8 +140,8 @@ def shadow_force_matched():
     from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.sim.pipeline import SimConfig, simulate
     from retarget.hands import get_hand
+    from retarget.pipeline import FORCE_CONTACT_TIMECONST
     from retarget.retargeter import RetargetConfig, Retargeter
-    from retarget.run import FORCE_CONTACT_TIMECONST
     from retarget.validate import Resimulator, ValidateConfig
 
     demo = generate_demo("cube2/tripod", "operator1", seed=0).trajectory
@@ -158,7 +158,7 @@ def test_calibration_presses_closer_to_the_human_and_keeps_the_object(shadow_for
     forces are nearer the human's (the force error drops, the correlation does not fall); the
     choice is the successful iterate with the least force error; the commands it returns are
     the ones its re-simulation ran (re-simulated again: the same forces)."""
-    from retarget.run import force_metrics
+    from retarget.metrics import force_metrics
 
     rt, resim, robot, human = shadow_force_matched
     sim0 = resim.run(robot.q_command, human)
@@ -207,8 +207,8 @@ def test_refined_targets_are_calibrated_in_the_refinement_scene(shadow_force_mat
     from dataclasses import replace
 
     from retarget.force_calibration import force_error
+    from retarget.pipeline import FORCE_CONTACT_TIMECONST
     from retarget.refine import RefineConfig, calibrate_refined, refine
-    from retarget.run import FORCE_CONTACT_TIMECONST
 
     rt, _, robot, human = shadow_force_matched
     human = human.slice(0, 360)  # the grasp and the lift

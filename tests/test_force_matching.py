@@ -174,7 +174,7 @@ def test_soft_default_contacts_press_less_than_commanded():
     re-simulations' (``FORCE_CONTACT_TIMECONST``), the finger sinks into the box and the servo
     loses part of its deflection: what the force calibration corrects."""
     from dexcanvas_core.sim.scene import PhysicsSettings
-    from retarget.run import FORCE_CONTACT_TIMECONST
+    from retarget.pipeline import FORCE_CONTACT_TIMECONST
 
     assert FORCE_CONTACT_TIMECONST == PhysicsSettings().solref[0] == 0.02
     m = finger_pressing_a_fixed_box(solref=0.02)
@@ -235,7 +235,7 @@ def test_retargeter_matches_the_human_object_force(human_with_forces):
     # every finger, and the object force error is the plan's own over those frames.
     from types import SimpleNamespace
 
-    from retarget.run import refined_force_metrics
+    from retarget.metrics import refined_force_metrics
 
     hand = r.hand
     fingers = list(hand.robot_fingers)
@@ -281,7 +281,7 @@ def test_retargeter_matches_the_human_object_force(human_with_forces):
     assert v0["relative_magnitude_error"] == pytest.approx(1.0)
     n = len(pressing)
     assert m0["force_profile_correlation_mean"] == pytest.approx((n - 1) / n)
-    from retarget.run import LOAD_BEARING_SHARE
+    from retarget.force_scores import LOAD_BEARING_SHARE
 
     nb = sum(1 for f in pressing if shares[f] >= LOAD_BEARING_SHARE)
     assert 1 <= nb
@@ -455,7 +455,7 @@ def test_cli_run_forces_reports_force_preservation(human_with_forces, tmp_path):
         reach = v["contact_reach_m"]  # every scored finger has a reach (or None)
         assert (f"plan {1000 * reach:.0f} mm" if reach is not None else "no contact") in text
     # the run's reached-finger summary counts the fingers within REACH_M
-    from retarget.run import REACH_M
+    from retarget.force_scores import REACH_M
     from retarget.viz.report import metrics_rows
 
     scored = [v for v in m["force_per_finger"].values() if v["profile_correlation"] is not None]
@@ -545,7 +545,8 @@ def test_refinement_backtracking_resumes_exactly_from_its_checkpoints():
     from dexcanvas_core.loaders.selection import load_demonstration
     from dexcanvas_core.sim.mpc import SamplingMPC
     from retarget.hands import get_hand
-    from retarget.refine import RefineConfig, _checkpoint, _restore, _tracking_env, refine
+    from retarget.refine import RefineConfig, _checkpoint, _restore, refine
+    from retarget.refine_scene import tracking_env
     from retarget.retargeter import Retargeter
 
     demo = load_demonstration("cube2/tripod").slice(250, 310)
@@ -553,7 +554,7 @@ def test_refinement_backtracking_resumes_exactly_from_its_checkpoints():
     rt = Retargeter(hand, geo)
     robot = rt.retarget(demo)
     cfg = RefineConfig()
-    env, _, _ = _tracking_env(hand, geo, demo, robot, rt.tip_sites, cfg)
+    env, _, _ = tracking_env(hand, geo, demo, robot, rt.tip_sites, cfg)
     mpc = SamplingMPC(cfg.mpc)
     env.reset()
     mpc.reset(env)
@@ -658,17 +659,18 @@ def test_refinement_finger_action_closes_the_finger_on_the_object():
     from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.loaders.selection import load_demonstration
     from retarget.hands import get_hand
-    from retarget.refine import RefineConfig, _tracking_env
+    from retarget.refine import RefineConfig
+    from retarget.refine_scene import tracking_env
     from retarget.retargeter import Retargeter
 
     demo = load_demonstration("cube2/tripod").slice(250, 330)
     hand, geo = get_hand("allegro"), object_geometry("cube2")
     rt = Retargeter(hand, geo)
     robot = rt.retarget(demo)
-    env0, act_q, _ = _tracking_env(
+    env0, act_q, _ = tracking_env(
         hand, geo, demo, robot, rt.tip_sites, RefineConfig(finger_close_m=0.0)
     )
-    env1, _, _ = _tracking_env(
+    env1, _, _ = tracking_env(
         hand, geo, demo, robot, rt.tip_sites, RefineConfig(finger_close_m=0.005)
     )
     dM = env1.M - env0.M  # (T, nu, 6 + F)
@@ -709,7 +711,8 @@ def test_refinement_finger_action_scales_the_force_offset_by_the_offset_gain():
     from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.loaders.selection import load_demonstration
     from retarget.hands import get_hand
-    from retarget.refine import RefineConfig, _tracking_env
+    from retarget.refine import RefineConfig
+    from retarget.refine_scene import tracking_env
     from retarget.retargeter import Retargeter
 
     demo = load_demonstration("cube2/tripod").slice(250, 300)
@@ -717,7 +720,7 @@ def test_refinement_finger_action_scales_the_force_offset_by_the_offset_gain():
     rt = Retargeter(hand, geo)
     robot = rt.retarget(demo)
     envs = {
-        g: _tracking_env(
+        g: tracking_env(
             hand, geo, demo, robot, rt.tip_sites, RefineConfig(finger_close_m=0.0, offset_gain=g)
         )
         for g in (1.0, 2.5)
@@ -745,7 +748,8 @@ def test_refinement_closing_step_moves_coupled_joints_with_their_servo():
     from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.loaders.selection import load_demonstration
     from retarget.hands import get_hand
-    from retarget.refine import RefineConfig, _tracking_env
+    from retarget.refine import RefineConfig
+    from retarget.refine_scene import tracking_env
     from retarget.retargeter import Retargeter
 
     demo = load_demonstration("cube2/tripod").slice(250, 300)
@@ -753,10 +757,10 @@ def test_refinement_closing_step_moves_coupled_joints_with_their_servo():
     rt = Retargeter(hand, geo)
     robot = rt.retarget(demo)
     close = 0.005
-    env0, act_q, _ = _tracking_env(
+    env0, act_q, _ = tracking_env(
         hand, geo, demo, robot, rt.tip_sites, RefineConfig(finger_close_m=0.0)
     )
-    env1, _, _ = _tracking_env(
+    env1, _, _ = tracking_env(
         hand, geo, demo, robot, rt.tip_sites, RefineConfig(finger_close_m=close)
     )
     dM = env1.M - env0.M
@@ -795,7 +799,7 @@ def test_refinement_closing_step_moves_coupled_joints_with_their_servo():
 def test_finger_force_profiles_score_a_reproduction_numerically():
     """Per finger: a reproduction at twice the force correlates perfectly and is off by 100 %;
     one that never presses scores 0; a finger the reference never loads is not scored."""
-    from retarget.run import correlation_means, finger_force_profiles
+    from retarget.force_scores import correlation_means, finger_force_profiles
 
     h = np.array([0.0, 0.0, 1.0, 2.0, 3.0, 2.0, 1.0, 0.0, 0.0, 0.0])
     H = np.stack([h, h, 0.01 * h, 0.5 * h], axis=1)  # the third is a graze: ≤ 0.03 N
@@ -826,7 +830,7 @@ def test_finger_reach_is_the_median_plan_distance_over_the_loaded_frames():
     """``contact_reach_m``: the plan's finger-to-contact distance, median over the frames the
     human finger loads (NaN frames skipped, none: ``None``); the ``_reached`` mean scores only
     fingers within ``REACH_M``; a reach of the wrong shape is refused."""
-    from retarget.run import REACH_M, correlation_means, finger_force_profiles
+    from retarget.force_scores import REACH_M, correlation_means, finger_force_profiles
 
     h = np.array([0.0, 0.0, 1.0, 2.0, 3.0, 2.0, 1.0, 0.0, 0.0, 0.0])
     H = np.stack([h, h, h], axis=1)
@@ -859,7 +863,7 @@ def test_band_limited_correlation_sees_the_profile_through_contact_chatter():
     even, so the alternation cancels); a reproduction of the wrong shape stays wrong; the
     window is the force pipeline's 50 ms capture smoothing, and a bad one is refused."""
     from dexcanvas_core.sim.signal import moving_average
-    from retarget.run import correlation_means, finger_force_profiles, profile_band_frames
+    from retarget.force_scores import correlation_means, finger_force_profiles, profile_band_frames
 
     T = 240
     h = 2.0 * np.clip(np.sin(np.linspace(0.0, 2 * np.pi, T)), 0.0, None)  # one press, 0–2 N
@@ -893,7 +897,7 @@ def test_band_limited_correlation_sees_the_profile_through_contact_chatter():
 def test_human_replay_is_scored_like_a_robot_against_the_first_simulation(human_with_forces):
     """The same simulation reproduces itself exactly; one lagging by 5 frames (compared over
     the common frames) does not; missing forces and unknown fingers are refused."""
-    from retarget.run import human_replay_metrics
+    from retarget.metrics import human_replay_metrics
 
     h = human_with_forces
     same = human_replay_metrics(h, h)
@@ -927,7 +931,7 @@ def test_cli_human_replay_scores_the_human_forces_against_themselves(
 
     from dexcanvas_core.io import write_dataset
     from retarget.cli import main
-    from retarget.run import HUMAN_REPLAY_SEED
+    from retarget.pipeline import HUMAN_REPLAY_SEED
 
     src = tmp_path / "h.lance"
     write_dataset([human_with_forces.slice(250, 370)], src)

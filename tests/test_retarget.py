@@ -299,7 +299,7 @@ def test_nearest_of_computes_only_the_asked_fingers(demo, monkeypatch):
 
 
 def test_contact_error_per_finger_and_shape_errors():
-    from retarget.run import contact_error_per_finger
+    from retarget.metrics import contact_error_per_finger
 
     err = np.array([[0.001, np.nan, np.nan], [0.003, 0.02, np.nan]])
     assert contact_error_per_finger(err, ["thumb", "index", "middle"]) == {
@@ -428,7 +428,7 @@ def test_cli_run_time_scale_slows_the_demonstration_and_says_so(small_dataset, t
     """``retarget run --time-scale 2`` executes the demonstration twice as slowly: the same
     frames at half the rate, recorded in metrics.json and on the terminal; a replay of the run
     (``retarget.viz``) stretches it alike and reproduces the re-simulation."""
-    from retarget.run import RunConfig, time_scaled
+    from retarget.pipeline import RunConfig, time_scaled
     from retarget.viz.data import load_human_for_run, load_run, record_resimulation
 
     out = tmp_path / "slow"
@@ -489,8 +489,8 @@ def test_cli_run_defaults_are_the_run_config_defaults():
     """The CLI states its defaults literally (``retarget.run`` loads only to run): they must
     be ``RunConfig``'s, and ``RunConfig``'s refinement retries ``RefineConfig``'s."""
     from retarget.cli import _plain_run_config, build_parser
+    from retarget.pipeline import RunConfig
     from retarget.refine import RefineConfig
-    from retarget.run import RunConfig
 
     args = build_parser().parse_args(["run", "--hand", "shadow", "--pair", "cube2/tripod"])
     cli = _plain_run_config(args)

@@ -9,7 +9,8 @@ CAPTURE_SMOOTH_S = 0.05
 """Bandwidth of the comparison with the captured motion: positions (for the acceleration) and
 forces are both moving-averaged over this window [s] (mocap accelerations are meaningless at
 higher frequencies). The force pipeline's Newton–Euler check and the retargeting's
-band-limited force-profile correlation (``retarget.run.profile_band_frames``) both use it."""
+band-limited force-profile correlation
+(``retarget.force_scores.profile_band_frames``) both use it."""
 
 
 def moving_average(x: np.ndarray, n: int) -> np.ndarray:

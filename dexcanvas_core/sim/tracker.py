@@ -18,9 +18,9 @@ The reward (the DexCanvas paper's) per frame is ``exp(-60·pos_err) + exp(-10·r
 
 **Trackers** (:mod:`dexcanvas_core.sim.mpc`) implement ``ResidualTracker`` (``reset(env)``,
 ``act(env) -> a``): the zero-residual ``OpenLoop``, and ``SamplingMPC`` (predictive sampling
-with a softmax over the best samples, parallel rollouts with ``mujoco.rollout``). A learned residual policy
-(the paper's per-pair PPO) plugs in the same way: it reads ``env.observation()`` and returns
-``a``; the scene, the reference and the force code do not change.
+with a softmax over the best samples, parallel rollouts with ``mujoco.rollout``). A learned
+residual policy (the paper's per-pair PPO) plugs in the same way: it reads
+``env.observation()`` and returns ``a``; the scene, the reference and the force code do not change.
 """
 
 from __future__ import annotations

@@ -317,8 +317,8 @@ def load_human(
 
 def load_human_for_run(run: RunFiles) -> Trajectory:
     """The demonstration a run was made from (``metrics.json``: dataset, pair, uuid), executed
-    as slowly as the run executed it (``time_scale``, :func:`retarget.run.time_scaled`)."""
-    from retarget.run import time_scaled
+    as slowly as the run executed it (``time_scale``, :func:`retarget.pipeline.time_scaled`)."""
+    from retarget.pipeline import time_scaled
 
     m = run.metrics
     traj = time_scaled(
@@ -434,7 +434,7 @@ def record_resimulation(
             self.last_data = d
             return super()._contact_forces(d)
 
-    from retarget.run import FORCE_CONTACT_TIMECONST
+    from retarget.pipeline import FORCE_CONTACT_TIMECONST
     from retarget.validate import ValidateConfig
 
     stiff = bool(metrics and metrics.get("forces"))

@@ -346,7 +346,7 @@ def metrics_rows(m: dict) -> list[tuple[str, str]]:
             )
         )
     if "fingers_reached" in m:
-        from retarget.run import REACH_M
+        from retarget.force_scores import REACH_M
 
         rows.append(
             (

@@ -257,7 +257,9 @@ def _prepare(cfg: SnapshotConfig) -> tuple[RunFiles, object, list[int]]:
         human = load_human_for_run(run)
         return run, human, choose_frames(cfg, run.num_frames)
     from retarget.hands import get_hand
-    from retarget.run import RunConfig, check_pair, load_subject, run_retarget
+    from retarget.loading import load_subject
+    from retarget.pipeline import check_pair
+    from retarget.run import RunConfig, run_retarget
 
     hand = get_hand(cfg.hand)
     rcfg = RunConfig(
@@ -269,7 +271,7 @@ def _prepare(cfg: SnapshotConfig) -> tuple[RunFiles, object, list[int]]:
         backend=cfg.backend,
         progress=cfg.progress,
     )
-    human, subject, _ = load_subject(rcfg)
+    human, subject, _ = load_subject(rcfg.pair, rcfg.dataset, rcfg.index, rcfg.progress)
     check_pair(hand, subject.manipulation_type)
     frames = choose_frames(cfg, human.num_frames)  # before the long part
     run_retarget(rcfg)
