@@ -1,4 +1,4 @@
-"""``benchmarks/force_preservation.py``: variant selection, ``--set`` overrides and the
+"""``benchmarks.force_preservation``: variant selection, ``--set`` overrides and the
 human-simulation cache, on a short real demonstration."""
 
 from __future__ import annotations
