@@ -19,13 +19,16 @@ hand-below-the-table diagnostic (``table_penetration``).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
+import multiprocessing
 import os
 import platform
 import subprocess
 import sys
 import traceback
+from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from datetime import datetime, timezone
 from importlib.metadata import PackageNotFoundError, version
@@ -441,6 +444,26 @@ def one_thread_env():
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
+
+
+@contextmanager
+def worker_pool(workers: int):
+    """A pool of ``workers`` spawned processes of one thread each (:func:`one_thread_env`,
+    :func:`init_worker`); shut down (waiting for its jobs) on exit."""
+    ctx = multiprocessing.get_context("spawn")
+    with (
+        one_thread_env(),
+        ProcessPoolExecutor(workers, mp_context=ctx, initializer=init_worker) as pool,
+    ):
+        yield pool
+
+
+def resolve_out(cfg, name: str):
+    """``cfg`` (a frozen config with an ``out`` field) with ``out`` set: its own, or where a run
+    of benchmark ``name`` at this checkout's commit writes by default (:func:`result_path`)."""
+    if cfg.out is not None:
+        return cfg
+    return dataclasses.replace(cfg, out=result_path(name, git_commit()))
 
 
 def error_record(e: BaseException) -> dict:

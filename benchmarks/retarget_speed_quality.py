@@ -56,7 +56,7 @@ import os
 import sys
 import time
 import traceback
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -75,7 +75,7 @@ from benchmarks._common import (
     pct,
     progress_bar,
     resim,
-    result_path,
+    resolve_out,
     versions,
 )
 from dexcanvas_core.demos.geometry import object_geometry
@@ -389,9 +389,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
 
     # Tables are wider than the 80 columns rich assumes off a terminal.
     console = console or Console(width=None if sys.stdout.isatty() else 120)
-    cfg = cfg.validate()
-    if cfg.out is None:
-        cfg = replace(cfg, out=result_path(NAME, git_commit()))
+    cfg = resolve_out(cfg.validate(), NAME)
     t_start = time.perf_counter()
     load0 = os.getloadavg()
     hands = [get_hand(h) for h in (cfg.hands or available_hands())]

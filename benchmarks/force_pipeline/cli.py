@@ -20,7 +20,7 @@ from benchmarks._common import (
     machine_info,
     parse_override,
     pick_pairs,
-    result_path,
+    resolve_out,
     versions,
 )
 from benchmarks.force_pipeline.aggregate import (
@@ -52,9 +52,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
     """Run the suite in every condition, print the tables, write the JSON and plots; return
     the JSON document."""
     console = console or Console(width=None if sys.stdout.isatty() else 140)
-    cfg = cfg.validate()
-    if cfg.out is None:
-        cfg = dataclasses.replace(cfg, out=result_path(NAME, git_commit()))
+    cfg = resolve_out(cfg.validate(), NAME)
     t_start = time.perf_counter()
     load0 = os.getloadavg()
     pairs = pick_pairs(cfg.n_pairs, cfg.seed)

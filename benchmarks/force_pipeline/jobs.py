@@ -3,9 +3,8 @@ them."""
 
 from __future__ import annotations
 
-import multiprocessing
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, wait
 from pathlib import Path
 
 import numpy as np
@@ -13,10 +12,9 @@ import numpy as np
 from benchmarks._common import (
     error_record,
     generate_one,
-    init_worker,
-    one_thread_env,
     operator_for,
     progress_bar,
+    worker_pool,
 )
 from benchmarks.force_pipeline.config import MOCAP_DROPOUT, MOCAP_NOISE_MM, BenchConfig
 from dexcanvas_core.mocap import fit_markers, render_markers
@@ -160,12 +158,7 @@ def run_jobs(cfg: BenchConfig, pairs: list, plans: list, plot_dir: Path, console
     total = len(pairs) + sum(len(p) for p in plans)
     demos: dict[int, dict] = {}
     rows: list[dict] = []
-    ctx = multiprocessing.get_context("spawn")
-    with (
-        one_thread_env(),
-        ProcessPoolExecutor(cfg.workers, mp_context=ctx, initializer=init_worker) as pool,
-        progress_bar(console) as prog,
-    ):
+    with worker_pool(cfg.workers) as pool, progress_bar(console) as prog:
         task = prog.add_task("generating + fitting", total=total)
         pending = {pool.submit(_prepare, (i, p, cfg.seed, mocap)): (i, None)
                    for i, p in enumerate(pairs)}  # fmt: skip

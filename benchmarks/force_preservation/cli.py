@@ -22,7 +22,7 @@ from benchmarks._common import (
     load_demonstrations,
     machine_info,
     parse_override,
-    result_path,
+    resolve_out,
     versions,
 )
 from benchmarks.force_preservation.aggregate import (
@@ -72,9 +72,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
     """Run every hand × pair × object × variant, print the tables, write the JSON and the plot;
     return the JSON document."""
     console = console or Console(width=None if sys.stdout.isatty() else 160)
-    cfg = cfg.validate()
-    if cfg.out is None:
-        cfg = dataclasses.replace(cfg, out=result_path(NAME, git_commit()))
+    cfg = resolve_out(cfg.validate(), NAME)
     t_start = time.perf_counter()
     load0 = os.getloadavg()
     hands = [get_hand(h) for h in (cfg.hands or available_hands())]

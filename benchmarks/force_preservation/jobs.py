@@ -3,9 +3,8 @@ pool that runs them."""
 
 from __future__ import annotations
 
-import multiprocessing
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, wait
 from functools import cache
 from types import SimpleNamespace
 
@@ -13,12 +12,11 @@ import numpy as np
 
 from benchmarks._common import (
     error_record,
-    init_worker,
-    one_thread_env,
     progress_bar,
     resim_result,
     sim_metrics,
     table_penetration,
+    worker_pool,
 )
 from benchmarks.force_preservation.aggregate import replay_record
 from benchmarks.force_preservation.cache import human_cache_key, load_human_sim, store_human_sim
@@ -319,12 +317,7 @@ def run_jobs(cfg: BenchConfig, demos: list, plans: list, hands: list, console):
     total = sum(len(p) * (1 + len(performable[i])) for i, p in enumerate(plans))
     human: list[dict] = []
     rows: list[dict] = []
-    ctx = multiprocessing.get_context("spawn")
-    with (
-        one_thread_env(),
-        ProcessPoolExecutor(cfg.workers, mp_context=ctx, initializer=init_worker) as pool,
-        progress_bar(console) as prog,
-    ):
+    with worker_pool(cfg.workers) as pool, progress_bar(console) as prog:
         task = prog.add_task("human force pipeline", total=total)
         pending = {}
         keys = {}

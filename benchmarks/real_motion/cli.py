@@ -7,7 +7,7 @@ import argparse
 import os
 import sys
 import time
-from dataclasses import asdict, replace
+from dataclasses import asdict
 from pathlib import Path
 
 from rich.console import Console
@@ -20,7 +20,7 @@ from benchmarks._common import (
     command_line,
     git_commit,
     machine_info,
-    result_path,
+    resolve_out,
     versions,
 )
 from benchmarks.real_motion.aggregate import summarize
@@ -50,9 +50,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
     """Build the cases, run the jobs not finished yet, print the tables, write the JSON and
     the page; return the JSON document."""
     console = console or Console(width=None if sys.stdout.isatty() else 140)
-    cfg = cfg.validate()
-    if cfg.out is None:
-        cfg = replace(cfg, out=result_path(NAME, git_commit()))
+    cfg = resolve_out(cfg.validate(), NAME)
     t0 = time.perf_counter()
     load0 = os.getloadavg()
     work = Path(cfg.work)

@@ -4,10 +4,9 @@ them."""
 from __future__ import annotations
 
 import json
-import multiprocessing
 import time
 import traceback
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,9 +23,8 @@ from rich.progress import (
 
 from benchmarks._common import (
     atomic_write_text,
-    init_worker,
     json_default,
-    one_thread_env,
+    worker_pool,
 )
 from benchmarks.real_motion.aggregate import mano_record, retarget_record
 from benchmarks.real_motion.cases import Case, slug
@@ -253,10 +251,8 @@ class Scheduler:
         )
         if not todo_mano and not todo_hand:
             return
-        ctx = multiprocessing.get_context("spawn")
-        with one_thread_env():
+        with worker_pool(workers) as pool:
             with (
-                ProcessPoolExecutor(workers, mp_context=ctx, initializer=init_worker) as pool,
                 Progress(
                     "[progress.description]{task.description}",
                     BarColumn(),
