@@ -180,12 +180,6 @@ def newest_result(name: str, results: Path = RESULTS) -> Path | None:
     return max(files, key=key)
 
 
-def load_newest(name: str, results: Path = RESULTS) -> dict | None:
-    """The document of :func:`newest_result` (``None`` if there is none)."""
-    path = newest_result(name, results)
-    return None if path is None else json.loads(path.read_text())
-
-
 def display_path(path: Path) -> str:
     """``path`` relative to the repository root where it lies inside it (as pages show it),
     else as given."""
