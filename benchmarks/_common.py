@@ -1,14 +1,15 @@
-"""Helpers shared by the benchmarks: the demonstration suites, re-simulation, terminal and
-JSON output.
+"""Helpers shared by the benchmarks: the demonstration suites, re-simulation, worker processes,
+table cells, and the committed results (``benchmarks/results/<name>/<date>-<commit>.json``:
+where a run writes, which file is the newest, the commit, machine and command it records).
 
 Two suites of the built-in generator (``dexcanvas_core.demos``):
 
-* by manipulation type (``benchmarks/force_pipeline.py``, ``mocap_fit.py``): ``pick_pairs``
+* by manipulation type (``benchmarks.force_pipeline``, ``mocap_fit``): ``pick_pairs``
   takes feasible (object, manipulation type) pairs round-robin over the 21 types (shuffled within
   a type by the seed), ``generate_one`` generates the demonstration of the ``i``-th pair with
   operator ``i mod 5`` and seed ``seed + i`` (retrying an infeasible seed), so every benchmark
   that uses them sees the same demonstrations for the same ``--seed``;
-* by group (``retarget_speed_quality.py``, ``force_preservation.py``): ``load_demonstrations``
+* by group (``retarget_speed_quality``, ``force_preservation``): ``load_demonstrations``
   takes pairs in ``select_pairs`` order (spread evenly over power, intermediate, precision and
   in-hand), one operator and seed, each demonstration cropped by ``Trajectory.crop``.
 
@@ -18,9 +19,19 @@ hand-below-the-table diagnostic (``table_penetration``).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
+import multiprocessing
 import os
+import platform
+import subprocess
+import sys
+import traceback
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
+from datetime import datetime, timezone
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import numpy as np
@@ -92,6 +103,7 @@ def generate(n: int, seed: int) -> list:
 
 
 def json_default(o):
+    """JSON for numpy scalars and arrays and paths (``json.dumps(default=...)``)."""
     if isinstance(o, np.generic):
         return o.item()
     if isinstance(o, np.ndarray):
@@ -101,13 +113,86 @@ def json_default(o):
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
-def atomic_write_json(path: Path, obj) -> None:
-    """Write ``obj`` as indented JSON through a temporary file and a rename."""
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write ``text`` through a temporary file (named by the process id, so concurrent writers
+    never share one) and a rename; the temporary file is gone afterwards either way."""
+    atomic_write_bytes(path, text.encode())
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` through a temporary file and a rename, as :func:`atomic_write_text`."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(obj, indent=2, default=json_default))
-    os.replace(tmp, path)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def atomic_write_json(path: Path, obj, indent: int = 2) -> None:
+    """Write ``obj`` as indented JSON (:func:`json_default` for numpy values and paths),
+    atomically (:func:`atomic_write_text`)."""
+    atomic_write_text(path, json.dumps(obj, indent=indent, default=json_default))
+
+
+# ------------------------------------------------------------------------ committed results
+ROOT = Path(__file__).resolve().parent.parent
+"""The repository's root."""
+RESULTS = ROOT / "benchmarks" / "results"
+"""The committed results: ``<name>/<date>-<commit>.json``, one file per run of a benchmark."""
+PAGES = ROOT / "docs" / "benchmarks"
+"""The benchmark pages, generated from the newest result of each benchmark."""
+
+
+def result_path(name: str, commit: str | None, results: Path = RESULTS) -> Path:
+    """Where a run of benchmark ``name`` at ``commit`` (:func:`git_commit`) writes its JSON by
+    default: ``results/<name>/<date>-<commit>.json``, the date today's in UTC (ISO format)."""
+    day = datetime.now(timezone.utc).date().isoformat()
+    return Path(results) / name / f"{day}-{commit or 'unknown'}.json"
+
+
+def _commit_time(commit: str) -> int:
+    """The commit time [s since the epoch] of ``commit`` in this checkout (0 if unknown)."""
+    try:
+        out = subprocess.run(
+            ["git", "-C", str(ROOT), "show", "-s", "--format=%ct", commit],
+            capture_output=True, text=True, check=True,
+        ).stdout.strip()  # fmt: skip
+        return int(out)
+    except (OSError, ValueError, subprocess.CalledProcessError):
+        return 0
+
+
+def newest_result(name: str, results: Path = RESULTS) -> Path | None:
+    """The newest JSON of benchmark ``name`` in ``results/<name>/`` (``None`` if there is
+    none): the latest date in the file names, then the latest commit time of the commit they
+    name (``<date>-<commit>[+dirty].json``), then the latest modification time."""
+    files = sorted(Path(results, name).glob("*.json"))
+    if not files:
+        return None
+
+    def key(p: Path) -> tuple:
+        day, commit = p.stem[:10], p.stem[11:].split("+")[0]
+        return day, _commit_time(commit), p.stat().st_mtime
+
+    return max(files, key=key)
+
+
+def display_path(path: Path) -> str:
+    """``path`` relative to the repository root where it lies inside it (as pages show it),
+    else as given."""
+    try:
+        return Path(path).resolve().relative_to(ROOT).as_posix()
+    except ValueError:
+        return str(path)
+
+
+def command_line(module: str, argv: list[str] | None = None) -> str:
+    """The command that ran a benchmark: ``python -m <module>`` and its arguments (``argv``;
+    default: this process's)."""
+    return " ".join([f"python -m {module}", *(sys.argv[1:] if argv is None else argv)])
 
 
 def config_overrides(pairs, config_cls, option: str = "--set") -> dict:
@@ -251,8 +336,6 @@ def progress_bar(console):
 def machine_info(load_start, **extra) -> dict:
     """What a result's ``machine`` records: platform, Python, CPU count, the load average at the
     start (``load_start``, ``os.getloadavg()`` then) and now, and ``extra`` (e.g. workers)."""
-    import platform
-
     return {
         "platform": platform.platform(),
         "python": platform.python_version(),
@@ -266,16 +349,13 @@ def machine_info(load_start, **extra) -> dict:
 def git_commit() -> str | None:
     """The checkout's commit (``git rev-parse --short HEAD``, ``+dirty`` with uncommitted
     changes to tracked files), or ``None`` outside a git checkout."""
-    import subprocess
-
-    root = Path(__file__).resolve().parent.parent
     try:
         head = subprocess.run(
-            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
+            ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
             capture_output=True, text=True, check=True,
         ).stdout.strip()  # fmt: skip
         dirty = subprocess.run(
-            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            ["git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no"],
             capture_output=True, text=True, check=True,
         ).stdout.strip()  # fmt: skip
     except (OSError, subprocess.CalledProcessError):
@@ -285,8 +365,6 @@ def git_commit() -> str | None:
 
 def versions(dists) -> dict:
     """Installed version of each distribution in ``dists`` (``None`` when absent)."""
-    from importlib.metadata import PackageNotFoundError, version
-
     out = {}
     for dist in dists:
         try:
@@ -294,3 +372,99 @@ def versions(dists) -> dict:
         except PackageNotFoundError:
             out[dist] = None
     return out
+
+
+# ----------------------------------------------------------------------------- table cells
+DASH = "–"
+"""A missing value's cell."""
+
+
+def num(x, scale: float = 1.0, fmt: str = ".2f") -> str:
+    """``scale · x`` formatted with ``fmt``, or :data:`DASH` for ``None``."""
+    return DASH if x is None else format(scale * x, fmt)
+
+
+def mm(x, fmt: str = ".1f") -> str:
+    """A length [m] in mm (no unit), or :data:`DASH`."""
+    return num(x, 1e3, fmt)
+
+
+def cm(x, fmt: str = ".1f") -> str:
+    """A length [m] in cm (no unit), or :data:`DASH`."""
+    return num(x, 1e2, fmt)
+
+
+def pct(x, fmt: str = ".0f", unit: str = " %") -> str:
+    """A share in per cent followed by ``unit``, or :data:`DASH`."""
+    return DASH if x is None else f"{format(100 * x, fmt)}{unit}"
+
+
+def coloured(text: str, met: bool | None) -> str:
+    """``text`` in rich markup: green where a target is ``met``, red where not, plain for
+    ``None``."""
+    if met is None:
+        return text
+    return f"[green]{text}[/green]" if met else f"[red]{text}[/red]"
+
+
+# ---------------------------------------------------------------------------------- workers
+THREAD_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+"""The BLAS/OpenMP thread-count variables set to 1 for the worker processes."""
+
+
+def init_worker() -> None:
+    """One thread per worker: the BLAS/OpenMP variables are set by the parent before the
+    spawn (they must be in place when numpy loads, :func:`one_thread_env`), torch's pools
+    here."""
+    logging.basicConfig(level=logging.ERROR)
+    try:
+        import torch  # heavy: only the worker processes need it here
+    except ImportError:  # pragma: no cover - torch is a dependency of the mocap fit
+        return
+    torch.set_num_threads(1)
+    torch.set_num_interop_threads(1)
+
+
+@contextmanager
+def one_thread_env():
+    """BLAS/OpenMP at one thread for the processes spawned inside (restored on exit)."""
+    saved = {k: os.environ.get(k) for k in THREAD_ENV}
+    os.environ.update({k: "1" for k in THREAD_ENV})
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+@contextmanager
+def worker_pool(workers: int):
+    """A pool of ``workers`` spawned processes of one thread each (:func:`one_thread_env`,
+    :func:`init_worker`); shut down (waiting for its jobs) on exit."""
+    ctx = multiprocessing.get_context("spawn")
+    with (
+        one_thread_env(),
+        ProcessPoolExecutor(workers, mp_context=ctx, initializer=init_worker) as pool,
+    ):
+        yield pool
+
+
+def resolve_out(cfg, name: str):
+    """``cfg`` (a frozen config with an ``out`` field) with ``out`` set: its own, or where a run
+    of benchmark ``name`` at this checkout's commit writes by default (:func:`result_path`)."""
+    if cfg.out is not None:
+        return cfg
+    return dataclasses.replace(cfg, out=result_path(name, git_commit()))
+
+
+def error_record(e: BaseException) -> dict:
+    """A failed job's row fields: the error and a short traceback."""
+    return {"error": f"{type(e).__name__}: {e}", "traceback": traceback.format_exc(limit=4)}
+
+
+def is_five_finger(hand) -> bool:
+    """Five distinct robot fingers (Shadow, SVH, Ability, Inspire)."""
+    return len(set(hand.robot_fingers)) == 5

@@ -12,7 +12,7 @@ copies. It prints the numbers quoted in ``dexcanvas_core/capture/formats/*.py``:
 * ``--taco DIR`` (GeneOH-Diffusion's TACO clips): side, ``flat_hand_mean``, what ``hand_trans``
   is, ``obj_verts`` against ``obj_pose`` and the ``.obj``, and the up axis.
 
-    python benchmarks/capture_conventions.py --ho3d DIR --models-dir DIR [--taco DIR]
+    python -m benchmarks.capture_conventions --ho3d DIR --models-dir DIR [--taco DIR]
 """
 
 from __future__ import annotations
@@ -223,7 +223,9 @@ def check_taco(root: Path) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks.capture_conventions", description=__doc__.split("\n\n")[0]
+    )
     ap.add_argument("--ho3d", type=Path, help="HO-3D-style sequences (folder)")
     ap.add_argument("--models-dir", type=Path, help="YCB object models")
     ap.add_argument("--every", type=int, default=25, help="hand checks on every n-th sequence")

@@ -17,15 +17,14 @@ default occlusion gaps and label swaps (``--gap-rate``, ``--swap-rate``), fits i
   fit costs when the machine is shared with other work);
 * label swaps found (share of truly swapped frames flagged ``swapped``) and flagged frames.
 
-Prints a table and writes JSON (default ``benchmarks/results/mocap_fit.json``)::
+Prints a table and writes JSON (default ``benchmarks/results/mocap_fit/<date>-<commit>.json``)::
 
-    python benchmarks/mocap_fit.py --n-demos 50 --noise 0 1 2 --dropout 0.1
+    python -m benchmarks.mocap_fit --n-demos 50 --noise 0 1 2 --dropout 0.1
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import multiprocessing
 import os
@@ -38,9 +37,15 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _common import generate
+from rich.console import Console
+from rich.table import Table
 
-DEFAULT_OUT = Path(__file__).parent / "results" / "mocap_fit.json"
+from benchmarks._common import atomic_write_json, command_line, generate, git_commit, result_path
+from dexcanvas_core.mocap import fit_markers, render_markers
+from dexcanvas_core.rotations import rotation_angle_between_aa
+
+NAME = "mocap_fit"
+"""The benchmark's name: its results folder ``benchmarks/results/<NAME>/``."""
 
 
 def _noop(_: int) -> None:
@@ -54,8 +59,6 @@ def _init_worker() -> None:
 
 
 def _fit_job(stream) -> dict:
-    from dexcanvas_core.mocap import fit_markers
-
     c0, w0 = time.process_time(), time.perf_counter()
     fit = fit_markers(stream)
     wall, cpu = time.perf_counter() - w0, time.process_time() - c0
@@ -80,8 +83,6 @@ def score(
     swap_rate: float,
     pool: ProcessPoolExecutor | None,
 ) -> dict:
-    from dexcanvas_core.mocap import render_markers
-    from dexcanvas_core.rotations import rotation_angle_between_aa
 
     streams = [
         render_markers(
@@ -140,9 +141,6 @@ def score(
 
 
 def print_table(results: list[dict], title: str) -> None:
-    from rich.console import Console
-    from rich.table import Table
-
     table = Table(title=title)
     cols = (
         "noise [mm]",
@@ -182,10 +180,10 @@ def print_table(results: list[dict], title: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    from dexcanvas_core.mocap.render import render_markers
-
     defaults = render_markers.__kwdefaults__
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(
+        prog="python -m benchmarks.mocap_fit", description=__doc__.split("\n\n")[0]
+    )
     p.add_argument("--n-demos", type=int, default=50, help="demonstrations (≥ 21: all types)")
     p.add_argument("--noise", type=float, nargs="+", default=[0.0, 1.0, 2.0], help="σ [mm]")
     p.add_argument("--dropout", type=float, default=0.1, help="marker sample dropout rate")
@@ -198,7 +196,12 @@ def main(argv: list[str] | None = None) -> dict:
         default=os.cpu_count() or 1,
         help="fitting processes (one thread each); 1 fits in this process",
     )
-    p.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON results")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="JSON results (default: benchmarks/results/mocap_fit/<date>-<commit>.json)",
+    )
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.ERROR)
     torch.set_num_threads(1)
@@ -229,7 +232,7 @@ def main(argv: list[str] | None = None) -> dict:
     print_table(results, title)
     report = {
         "benchmark": "mocap_fit",
-        "command": "python benchmarks/mocap_fit.py " + " ".join(argv or sys.argv[1:]),
+        "command": command_line("benchmarks.mocap_fit", argv),
         "demos": len(trajs),
         "manipulation_types": dict(sorted(types.items())),
         "operators": dict(sorted(Counter(t.operator for t in trajs).items())),
@@ -249,8 +252,8 @@ def main(argv: list[str] | None = None) -> dict:
         "python": sys.version.split()[0],
         "results": results,
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=2))
+    args.out = args.out or result_path(NAME, git_commit())
+    atomic_write_json(args.out, report)
     print(f"wrote {args.out}")
     return report
 

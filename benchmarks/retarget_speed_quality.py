@@ -41,11 +41,12 @@ Pairs: ``--n-pairs`` feasible pairs of the built-in demonstrations
 (``dexcanvas_core.demos``), spread evenly over the four groups (power, intermediate,
 precision, in-hand) by a deterministic round robin over manipulation types and objects; a
 hand skips pairs it cannot perform (``retarget.pipeline.check_pair``; counted). Prints a table per
-hand and an overall table with the targets, and writes JSON (per-run rows and aggregates).
+hand and an overall table with the targets, and writes JSON (per-run rows and aggregates;
+default ``benchmarks/results/retarget_speed_quality/<date>-<commit>.json``)::
 
-    python benchmarks/retarget_speed_quality.py                 # 20 pairs, every hand
-    python benchmarks/retarget_speed_quality.py --quick         # smoke run: 2 pairs, 1 hand
-    python benchmarks/retarget_speed_quality.py --hands allegro shadow --max-frames 240
+    python -m benchmarks.retarget_speed_quality                 # 20 pairs, every hand
+    python -m benchmarks.retarget_speed_quality --quick         # smoke run: 2 pairs, 1 hand
+    python -m benchmarks.retarget_speed_quality --hands allegro shadow --max-frames 240
 """
 
 from __future__ import annotations
@@ -59,19 +60,39 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
-from _common import (
+from rich.console import Console
+from rich.table import Table
+
+from benchmarks._common import (
     atomic_write_json,
+    command_line,
     config_overrides,
     git_commit,
     load_demonstrations,
     machine_info,
+    mm,
     parse_override,
+    pct,
     progress_bar,
     resim,
+    resolve_out,
     versions,
 )
+from dexcanvas_core.demos.geometry import object_geometry
+from dexcanvas_core.taxonomy import GROUPS
+from retarget.baselines import (
+    DexRetargetingBaseline,
+    DexRetargetingConfig,
+    KinematicMetrics,
+    measure_trajectory,
+)
+from retarget.hands import available_hands, get_hand
+from retarget.pipeline import check_pair
+from retarget.retargeter import RetargetConfig, Retargeter
+from retarget.validate import Resimulator
 
-DEFAULT_OUT = Path(__file__).parent / "results" / "retarget_speed_quality.json"
+NAME = "retarget_speed_quality"
+"""The benchmark's name: its results folder ``benchmarks/results/<NAME>/``."""
 OURS, OURS_Q, DEX = "ours", "ours (no squeeze)", "dex-retargeting"
 METHODS = (OURS, OURS_Q, DEX)
 VERSION_DISTS = ("dexcanvas-retarget", "dex-retargeting", "mujoco", "pin", "numpy", "nlopt",
@@ -93,7 +114,9 @@ class BenchConfig:
     """Demonstration pairs, spread over the four groups."""
     max_frames: int | None = None
     """Crop each demonstration to this many frames (around the start of the object motion)."""
-    out: Path = DEFAULT_OUT
+    out: Path | None = None
+    """JSON output; ``None``: ``benchmarks/results/retarget_speed_quality/<date>-<commit>.json``
+    (``benchmarks._common.result_path``)."""
     operator: str = "operator1"
     seed: int = 0
     dex_wrist: str = "free"
@@ -159,10 +182,6 @@ def run_one(
 ) -> list[dict]:
     """Both methods on one hand × pair: three rows (ours on q_command and q, dex-retargeting);
     the solves timed ``timing_repeats`` times, alternating (``_timing``)."""
-    from dexcanvas_core.demos.geometry import object_geometry
-    from retarget.baselines import KinematicMetrics, measure_trajectory
-    from retarget.retargeter import RetargetConfig, Retargeter
-    from retarget.validate import Resimulator
 
     geom = object_geometry(pair.object.id)
     base = {
@@ -302,14 +321,6 @@ def target_checks(overall: dict) -> list[dict]:
 
 
 # ----------------------------------------------------------------------------------- output
-def _mm(x) -> str:
-    return "–" if x is None else f"{1e3 * x:.2f}"
-
-
-def _pct(x) -> str:
-    return "–" if x is None else f"{100 * x:.0f}"
-
-
 def _ms(a: dict) -> str:
     """ms/frame (the median over the timing repeats), and their minimum where it differs."""
     if a["ms_per_frame"] is None:
@@ -320,7 +331,6 @@ def _ms(a: dict) -> str:
 
 
 def metrics_table(title: str, agg: dict):
-    from rich.table import Table
 
     t = Table(
         title=title,
@@ -339,20 +349,18 @@ def metrics_table(title: str, agg: dict):
             method,
             f"{a['runs']}" + (f" ({a['errors']} err)" if a["errors"] else ""),
             _ms(a),
-            _mm(a["keypoint_err_mean_m"]),
-            _mm(a["penetration_max_m"]),
-            _mm(a.get("self_penetration_max_m")),
-            _mm(a["contact_err_mean_m"]),
-            _pct(a["success_rate"]),
-            _pct(a["success_loose_rate"]),
-            _mm(a["table_penetration_max_m"]),
+            mm(a["keypoint_err_mean_m"], ".2f"),
+            mm(a["penetration_max_m"], ".2f"),
+            mm(a.get("self_penetration_max_m"), ".2f"),
+            mm(a["contact_err_mean_m"], ".2f"),
+            pct(a["success_rate"], unit=""),
+            pct(a["success_loose_rate"], unit=""),
+            mm(a["table_penetration_max_m"], ".2f"),
         )
     return t
 
 
 def targets_table(checks: list[dict]):
-    from rich.table import Table
-
     t = Table(title="targets (issue)")
     t.add_column("target")
     t.add_column("measured", justify="right")
@@ -378,16 +386,10 @@ def targets_table(checks: list[dict]):
 # ------------------------------------------------------------------------------------- main
 def run_benchmark(cfg: BenchConfig, console=None) -> dict:
     """Run every hand × pair, print the tables, write the JSON; return the JSON document."""
-    from rich.console import Console
-
-    from dexcanvas_core.taxonomy import GROUPS
-    from retarget.baselines import DexRetargetingBaseline, DexRetargetingConfig
-    from retarget.hands import available_hands, get_hand
-    from retarget.pipeline import check_pair
 
     # Tables are wider than the 80 columns rich assumes off a terminal.
     console = console or Console(width=None if sys.stdout.isatty() else 120)
-    cfg = cfg.validate()
+    cfg = resolve_out(cfg.validate(), NAME)
     t_start = time.perf_counter()
     load0 = os.getloadavg()
     hands = [get_hand(h) for h in (cfg.hands or available_hands())]
@@ -449,7 +451,7 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
         console.print(targets_table(checks))
     doc = {
         "benchmark": "retarget_speed_quality",
-        "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+        "command": command_line("benchmarks.retarget_speed_quality"),
         "config": {**asdict(cfg), "out": str(cfg.out)},
         "demonstrations": {
             "source": source,
@@ -492,11 +494,20 @@ def run_benchmark(cfg: BenchConfig, console=None) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks.retarget_speed_quality",
+        description=__doc__.split("\n\n")[0],
+    )
     ap.add_argument("--hands", nargs="+", default=None, help="hands to run (default: all)")
     ap.add_argument("--n-pairs", type=int, default=20, help="pairs over the four groups")
     ap.add_argument("--max-frames", type=int, default=None, help="crop each demonstration")
-    ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON output")
+    ap.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="JSON output (default: "
+        "benchmarks/results/retarget_speed_quality/<date>-<commit>.json)",
+    )
     ap.add_argument("--quick", action="store_true", help="smoke run: 2 pairs, 1 hand")
     ap.add_argument("--operator", default="operator1")
     ap.add_argument("--seed", type=int, default=0)
@@ -523,7 +534,6 @@ def main(argv: list[str] | None = None) -> int:
         "(the minimum beside it)",
     )
     a = ap.parse_args(argv)
-    from retarget.retargeter import RetargetConfig
 
     overrides = config_overrides(a.set, RetargetConfig)
     hands = tuple(a.hands) if a.hands else None

@@ -10,16 +10,15 @@ Without ``--dataset`` the script writes a synthetic DexCanvas-layout dataset (``
 rows of ``--min-frames``–``--max-frames`` frames at 120 Hz, no contacts) to a temporary
 directory with the toolkit's writer, loads it once, then times ``--steps`` steps per env count
 after ``--warmup`` untimed steps. Prints a table and writes JSON (default
-``benchmarks/results/rl_buffer.json``).
+``benchmarks/results/rl_buffer/<date>-<commit>.json``).
 
-    python benchmarks/rl_buffer.py                      # 1024 and 8192 envs on the CPU
-    python benchmarks/rl_buffer.py --envs 4096 --device cuda --steps 5000
+    python -m benchmarks.rl_buffer                      # 1024 and 8192 envs on the CPU
+    python -m benchmarks.rl_buffer --envs 4096 --device cuda --steps 5000
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
@@ -31,11 +30,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from benchmarks._common import atomic_write_json, git_commit, result_path
 from dexcanvas_core.io import write_dataset
 from dexcanvas_core.loaders import DexCanvasDataset, RLTrajectoryBuffer, trajectory_to_sample
 from dexcanvas_core.trajectory import HandTrack, ObjectMove, ObjectTrack, Trajectory
 
-DEFAULT_OUT = Path(__file__).parent / "results" / "rl_buffer.json"
+NAME = "rl_buffer"
+"""The benchmark's name: its results folder ``benchmarks/results/<NAME>/``."""
 
 
 def synthetic_trajectory(rng: np.random.Generator, uuid: str, T: int, fps: int = 120) -> Trajectory:
@@ -143,7 +144,9 @@ def print_table(results: list[Result], title: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(
+        prog="python -m benchmarks.rl_buffer", description=__doc__.split("\n\n")[0]
+    )
     p.add_argument("--dataset", type=Path, help="DexCanvas Lance dataset (default: synthetic)")
     p.add_argument("--envs", type=int, nargs="+", default=[1024, 8192], help="env counts")
     p.add_argument("--steps", type=int, default=2000, help="timed steps per env count")
@@ -154,7 +157,12 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--trajectories", type=int, default=64, help="synthetic: number of rows")
     p.add_argument("--min-frames", type=int, default=300, help="synthetic: shortest row")
     p.add_argument("--max-frames", type=int, default=1200, help="synthetic: longest row")
-    p.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON results")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="JSON results (default: benchmarks/results/rl_buffer/<date>-<commit>.json)",
+    )
     args = p.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
@@ -201,8 +209,8 @@ def main(argv: list[str] | None = None) -> dict:
         "dataset_load_s": round(t_load, 3),
         "results": [asdict(r) for r in results],
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=2))
+    args.out = args.out or result_path(NAME, git_commit())
+    atomic_write_json(args.out, report)
     print(f"wrote {args.out}")
     return report
 

@@ -34,11 +34,12 @@ hand's retargeted commands (``Retargeter`` defaults, ``q_command``) re-simulated
 object on the table by both drivers: success, largest object error, wrist tracking, the arm's
 largest force and the re-simulation's wall time.
 
-Writes ``benchmarks/results/wrist_tracking.json`` and ``docs/benchmarks/wrist_tracking.md``.
+Writes JSON (default ``benchmarks/results/wrist_tracking/<date>-<commit>.json``) and the page
+``docs/benchmarks/wrist_tracking.md``::
 
-    python benchmarks/wrist_tracking.py                     # every hand, 1 / 2.5 / 3 m/s
-    python benchmarks/wrist_tracking.py --hands shadow --speeds 2.5
-    python benchmarks/wrist_tracking.py --page-only         # the page from the JSON
+    python -m benchmarks.wrist_tracking                     # every hand, 1 / 2.5 / 3 m/s
+    python -m benchmarks.wrist_tracking --hands shadow --speeds 2.5
+    python -m benchmarks.wrist_tracking --page-only         # the page from the newest JSON
 """
 
 from __future__ import annotations
@@ -51,11 +52,37 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _common import atomic_write_json, git_commit, machine_info, progress_bar, versions
+from rich.console import Console
+from rich.table import Table
 
-ROOT = Path(__file__).resolve().parent.parent
-DEFAULT_OUT = ROOT / "benchmarks" / "results" / "wrist_tracking.json"
-PAGE = ROOT / "docs" / "benchmarks" / "wrist_tracking.md"
+from benchmarks._common import (
+    PAGES,
+    RESULTS,
+    atomic_write_json,
+    command_line,
+    display_path,
+    git_commit,
+    machine_info,
+    newest_result,
+    pct,
+    progress_bar,
+    result_path,
+    versions,
+)
+from dexcanvas_core.demos.geometry import object_geometry
+from dexcanvas_core.table import table_of
+from dexcanvas_core.taxonomy import Pair
+from dexcanvas_core.trajectory import HandTrack, ObjectTrack, Trajectory
+from retarget.hands import available_hands, get_hand
+from retarget.pipeline import check_pair
+from retarget.retargeter import Retargeter
+from retarget.validate import Resimulator, ValidateConfig
+from retarget.viz.data import load_human
+from retarget.wrist_drive import WristReference, frame_steps
+
+NAME = "wrist_tracking"
+"""The benchmark's name: its results folder ``benchmarks/results/<NAME>/``."""
+PAGE = PAGES / "wrist_tracking.md"
 DRIVERS = {"before": "servo", "after": "computed_torque"}
 TARGET_SPEED, TARGET_POS_MM, TARGET_ROT_DEG = 2.5, 5.0, 2.0
 FPS = 120.0
@@ -90,10 +117,6 @@ def carry(speed: float, acc: float, rot_deg: float, rot_s: float) -> tuple:
 
 def run_one(hand, t: np.ndarray, wrist: np.ndarray, driver: str, repeats: int) -> dict:
     """One hand × trajectory × driver: the row's numbers (module docstring)."""
-    from dexcanvas_core.demos.geometry import object_geometry
-    from dexcanvas_core.trajectory import HandTrack, ObjectTrack, Trajectory
-    from retarget.validate import Resimulator, ValidateConfig
-    from retarget.wrist_drive import WristReference, frame_steps
 
     T = len(t)
     human = Trajectory(
@@ -140,13 +163,6 @@ def run_one(hand, t: np.ndarray, wrist: np.ndarray, driver: str, repeats: int) -
 def demo_rows(hands, pair: str, repeats: int, console) -> list[dict]:
     """The grasp ``pair``'s built-in demonstration, retargeted onto each hand and re-simulated
     by both drivers (module docstring)."""
-    from dexcanvas_core.demos.geometry import object_geometry
-    from dexcanvas_core.table import table_of
-    from dexcanvas_core.taxonomy import Pair
-    from retarget.pipeline import check_pair
-    from retarget.retargeter import Retargeter
-    from retarget.validate import Resimulator, ValidateConfig
-    from retarget.viz.data import load_human
 
     p = Pair.parse(pair)
     human = load_human(None, pair)
@@ -211,10 +227,6 @@ def target_checks(rows: list[dict]) -> list[dict]:
 
 
 # ----------------------------------------------------------------------------------- output
-def _pct(x: float) -> str:
-    return f"{100 * x:.1f}"
-
-
 def _cells(b: dict, a: dict) -> list[str]:
     """before → after cells of one hand × speed."""
     return [
@@ -223,7 +235,8 @@ def _cells(b: dict, a: dict) -> list[str]:
         f"{b['rot_err_mean_deg']:.2f} → {a['rot_err_mean_deg']:.3f}",
         f"{b['rot_err_max_deg']:.2f} → {a['rot_err_max_deg']:.3f}",
         f"{a['force_max_n']:.0f} / {a['torque_max_nm']:.1f}",
-        f"{_pct(a['force_saturation_fraction'])} / {_pct(a['torque_saturation_fraction'])}",
+        f"{pct(a['force_saturation_fraction'], '.1f', '')} / "
+        f"{pct(a['torque_saturation_fraction'], '.1f', '')}",
         f"{b['ms_per_frame']:.3f} → {a['ms_per_frame']:.3f}",
     ]
 
@@ -256,7 +269,6 @@ def _pairs(doc: dict):
 
 
 def results_table(doc: dict):
-    from rich.table import Table
 
     t = Table(
         title="wrist tracking: before (position servos) → after (computed torque)",
@@ -298,8 +310,6 @@ def _demo_cells(r: dict) -> list[str]:
 
 
 def demo_table(doc: dict):
-    from rich.table import Table
-
     rows = [r for r in doc.get("demo", []) if "skipped" not in r]
     if not rows:
         return None
@@ -314,13 +324,13 @@ def demo_table(doc: dict):
     return t
 
 
-def render_page(doc: dict) -> str:
-    """The markdown page of a result document."""
+def render_page(doc: dict, source: Path) -> str:
+    """The markdown page of a result document read from ``source`` (a JSON file)."""
     m, c = doc["machine"], doc["config"]
     lines = [
         "# Wrist tracking in re-simulation",
         "",
-        "Generated by `benchmarks/wrist_tracking.py` from `benchmarks/results/wrist_tracking.json`"
+        f"Generated by `python -m benchmarks.wrist_tracking` from `{display_path(source)}`"
         f"; commit `{doc['commit']}`, {m['platform']}, Python {m['python']}, "
         f"{doc['wall_time_s']:.0f} s.",
         "",
@@ -390,8 +400,6 @@ def render_page(doc: dict) -> str:
 
 # ------------------------------------------------------------------------------------- main
 def run_benchmark(args, console) -> dict:
-    from retarget.hands import available_hands, get_hand
-
     t_start = time.perf_counter()
     load0 = os.getloadavg()
     hands = [get_hand(h) for h in (args.hands or available_hands())]
@@ -413,7 +421,7 @@ def run_benchmark(args, console) -> dict:
     g = hands[0].wrist_gains
     return {
         "benchmark": "wrist_tracking",
-        "command": " ".join(["python benchmarks/wrist_tracking.py", *sys.argv[1:]]),
+        "command": command_line("benchmarks.wrist_tracking"),
         "config": {
             "hands": [h.name for h in hands],
             "speeds_m_s": list(args.speeds),
@@ -452,9 +460,10 @@ def run_benchmark(args, console) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from rich.console import Console
-
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks.wrist_tracking",
+        description=__doc__.split("\n\n")[0],
+    )
     ap.add_argument("--hands", nargs="+", default=None, help="hands to run (default: all)")
     ap.add_argument("--speeds", nargs="+", type=float, default=[1.0, 2.5, 3.0],
                     help="peak carry speeds [m/s]")  # fmt: skip
@@ -464,17 +473,27 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=3, help="timed runs per row (median)")
     ap.add_argument("--demo", default="cube2/tripod",
                     help="built-in grasp re-simulated by both drivers ('none': skip)")  # fmt: skip
-    ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="JSON output")
+    ap.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="JSON output (default: benchmarks/results/wrist_tracking/<date>-<commit>.json; "
+        "with --page-only: the newest there)",
+    )
     ap.add_argument("--page", type=Path, default=PAGE, help="markdown page output")
     ap.add_argument("--page-only", action="store_true", help="write the page from --out")
     args = ap.parse_args(argv)
     console = Console(width=None if sys.stdout.isatty() else 160)
     if args.page_only:
+        args.out = args.out or newest_result(NAME)
+        if args.out is None:
+            raise SystemExit(f"no results in {RESULTS / NAME}; run the benchmark first")
         doc = json.loads(args.out.read_text())
     else:
         if min(args.speeds) <= 0 or args.acc <= 0 or args.rotation_s <= 0 or args.repeats < 1:
             raise SystemExit("--speeds, --acc, --rotation-s and --repeats must be positive")
         doc = run_benchmark(args, console)
+        args.out = args.out or result_path(NAME, doc["commit"])
         atomic_write_json(args.out, doc)
     console.print(results_table(doc))
     if (t := demo_table(doc)) is not None:
@@ -484,7 +503,7 @@ def main(argv: list[str] | None = None) -> int:
         ok = "[green]met[/green]" if t["met"] else "[red]not met[/red]"
         console.print(f"{t['hand']}: {t['target']}: {pos:.2f} mm, {rot:.3f}° — {ok}")
     args.page.parent.mkdir(parents=True, exist_ok=True)
-    args.page.write_text(render_page(doc))
+    args.page.write_text(render_page(doc, args.out))
     console.print(f"wrote {args.out} and {args.page} ({doc['wall_time_s']:.0f} s)")
     return 0
 

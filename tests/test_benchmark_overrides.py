@@ -1,19 +1,22 @@
-"""``benchmarks/force_pipeline.py --set FIELD=VALUE``: ablation overrides of the tracker."""
+"""``python -m benchmarks.force_pipeline --set FIELD=VALUE``: ablation overrides of the tracker."""
 
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
+import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-
-from force_pipeline import BenchConfig, parse_override, tracking_config
-
+import benchmarks.retarget_speed_quality as bench
+from benchmarks._common import config_overrides, parse_override
+from benchmarks.force_pipeline.config import BenchConfig, tracking_config
 from dexcanvas_core.errors import ValidationError
+from dexcanvas_core.example import example_trajectories
 from dexcanvas_core.sim.tracker import TrackingConfig
+from dexcanvas_core.taxonomy import Pair
+from retarget.baselines import DexRetargetingBaseline
+from retarget.hands import get_hand
+from retarget.retargeter import RetargetConfig
 
 
 def test_override_parses_python_literals():
@@ -51,12 +54,7 @@ def test_bad_overrides_fail_before_any_run(override, message):
 
 
 def test_retarget_benchmark_set_checks_names_and_values_before_any_run():
-    """``benchmarks/retarget_speed_quality.py --set``: RetargetConfig ablations of ours."""
-    import retarget_speed_quality as bench
-    from _common import config_overrides
-
-    from retarget.retargeter import RetargetConfig
-
+    """``python -m benchmarks.retarget_speed_quality --set``: RetargetConfig ablations of ours."""
     pairs = [parse_override("w_posture=1e-5"), parse_override("use_self_collision=False")]
     assert config_overrides(pairs, RetargetConfig) == {
         "w_posture": 1e-5,
@@ -75,13 +73,6 @@ def test_retarget_benchmark_times_each_pair_repeatedly_and_keeps_the_median():
     """``--timing-repeats``: both methods timed N times on the same pair, alternating; the
     row's time is the median of the N, the minimum beside it; the outputs are the first run's
     (every repeat computes the same)."""
-    import numpy as np
-    import retarget_speed_quality as bench
-
-    from dexcanvas_core.example import example_trajectories
-    from dexcanvas_core.taxonomy import Pair
-    from retarget.baselines import DexRetargetingBaseline
-    from retarget.hands import get_hand
 
     hand = get_hand("allegro")
     traj = next(t for t in example_trajectories(seed=0) if t.scene == "cube2").slice(100, 130)

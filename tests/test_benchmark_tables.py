@@ -1,24 +1,19 @@
-"""``benchmarks/force_preservation.py``: success by contact error and light / heavy success
+"""``benchmarks.force_preservation``: success by contact error and light / heavy success
 by wrench feasibility, from hand-made rows."""
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import pytest
+from rich.console import Console
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-
-from force_preservation import (
+from benchmarks.force_preservation.aggregate import (
     WRENCH_FEASIBLE,
     by_contact_error,
-    contact_error_table,
     correlation_by_reach,
     heavy_vs_light_by_wrench,
-    reach_table,
-    wrench_table,
 )
+from benchmarks.force_preservation.tables import contact_error_table, reach_table, wrench_table
+from benchmarks.retarget_speed_quality import DEX, OURS, target_checks, targets_table
 
 
 def _row(variant, index, success, contact_err=None, **extra):
@@ -77,8 +72,6 @@ def test_light_and_heavy_are_split_by_d_wrench_feasibility():
     e = t["e"]
     assert e["short"]["heavy_runs"] == 1 and e["short"]["heavy_success_rate"] == 1.0
     assert e["feasible"]["light_runs"] == 1 and e["feasible"]["heavy_runs"] == 0
-    from rich.console import Console
-
     console = Console(width=160, record=True)
     console.print(wrench_table("shadow", t))
     text = console.export_text()
@@ -86,8 +79,6 @@ def test_light_and_heavy_are_split_by_d_wrench_feasibility():
 
 
 def test_contact_error_table_renders_every_bin():
-    from rich.console import Console
-
     rows = [_row("d", 0, True, 0.001), _row("c", 0, False), _row("e", 0, True)]
     console = Console(width=120, record=True)
     console.print(contact_error_table("shadow", by_contact_error(rows)))
@@ -96,11 +87,8 @@ def test_contact_error_table_renders_every_bin():
 
 
 def test_speed_target_reports_the_ratio_to_dex_retargeting():
-    """``retarget_speed_quality``: the ms/frame target is absolute (met or not by the machine),
-    so the same run's ratio to dex-retargeting's time is reported beside it."""
-    from retarget_speed_quality import DEX, OURS, target_checks, targets_table
-    from rich.console import Console
-
+    """``benchmarks.retarget_speed_quality``: the ms/frame target is absolute (met or not by
+    the machine), so the same run's ratio to dex-retargeting's time is reported beside it."""
     agg = {
         "ms_per_frame": 0.6,
         "keypoint_err_mean_m": 0.016,
@@ -152,8 +140,6 @@ def test_fingers_are_pooled_by_reach_with_the_human_replay_on_the_same_fingers()
     assert d["no target"]["fingers"] == 1 and d["no target"]["correlation"] == pytest.approx(0.1)
     assert d["3–5 mm"]["correlation"] is None and d["> 20 mm"]["fingers"] == 0
     assert {b["bin"]: b["fingers"] for b in t["e"]}["> 20 mm"] == 1
-    from rich.console import Console
-
     console = Console(width=160, record=True)
     console.print(reach_table("shadow", t))
     text = console.export_text()

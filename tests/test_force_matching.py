@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from finger_scenes import finger_pressing_a_fixed_box
 
+from benchmarks.force_preservation.jobs import _hand_job
 from dexcanvas_core.taxonomy import OBJECTS
 from retarget.errors import RetargetError
 from retarget.force_matching import distribute, grasp_matrix, squeeze_offsets
@@ -974,15 +975,9 @@ def test_cli_human_replay_scores_the_human_forces_against_themselves(
 
 
 def test_force_benchmark_scores_every_variant_against_the_human_without_d(human_with_forces):
-    """``benchmarks/force_preservation.py --variants c``: (c)'s force columns come from the
+    """``python -m benchmarks.force_preservation --variants c``: (c)'s force columns come from the
     human's forces mapped onto the hand (``Retargeter.human_finger_forces``), the same numbers
     as when (d) runs beside it; (d)'s own mapping is that one too."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    import force_preservation as fp
-
     from dexcanvas_core.demos.geometry import object_geometry
     from retarget.hands import get_hand
     from retarget.retargeter import Retargeter
@@ -990,8 +985,8 @@ def test_force_benchmark_scores_every_variant_against_the_human_without_d(human_
     h = human_with_forces.slice(250, 400)
     base = {"hand": "shadow", "index": 0, "pair": "cube2/tripod", "object_id": "cube2"}
     base.update(object_variant="light", frames=h.num_frames, human_forces=True)
-    alone = {r["variant"]: r for r in fp._hand_job((base, h, h, "free", ("c",), {}, {}, 2))}
-    both = {r["variant"]: r for r in fp._hand_job((base, h, h, "free", ("c", "d"), {}, {}, 2))}
+    alone = {r["variant"]: r for r in _hand_job((base, h, h, "free", ("c",), {}, {}, 2))}
+    both = {r["variant"]: r for r in _hand_job((base, h, h, "free", ("c", "d"), {}, {}, 2))}
     for k in ("force_profile_correlation_mean", "force_correlation_mean", "contact_recall"):
         assert alone["c"][k] is not None
         assert alone["c"][k] == pytest.approx(both["c"][k])
