@@ -243,6 +243,8 @@ class PipelineResult:
     commands (``planned_commands`` the plan's)."""
     sim: ValidationResult
     """The re-simulation of ``robot.q_command``."""
+    resimulator: Resimulator
+    """The re-simulation's scene (run other commands in it: ``resimulator.run(q, trajectory)``)."""
     setup_s: float
     """Seconds spent before retargeting (human forces, retargeter construction)."""
     human_sim: dict | None = None
@@ -251,6 +253,8 @@ class PipelineResult:
     calibration: ForceCalibrationResult | None = None
     planned_commands: np.ndarray | None = None
     """The force-matched commands before force calibration (``None`` without it)."""
+    planned_sim: ValidationResult | None = None
+    """Their re-simulation (``None`` without force calibration)."""
     refined: RefineResult | None = None
     """The physics refinement, when it ran (the re-simulation lost the object)."""
     substituted: str | None = None
@@ -325,39 +329,47 @@ def retarget_demonstration(
     sim = resim.run(
         robot.q_command, traj, progress=_task(progress, "re-simulating", traj.num_frames)
     )
-    calibrated = planned = None
+    calibrated = planned = planned_sim = None
     if forces and calibrate_iterations > 0:
         n = calibrate_iterations
         calibrated = calibrate_forces(
             retargeter, resim, robot, traj, sim, ForceCalibrationConfig(iterations=n),
             progress=_task(progress, f"calibrating forces ({n} re-simulations)", n + 1),
         )  # fmt: skip
-        sim, planned = calibrated.sim, robot.q_command
-        robot.q_command = calibrated.commands
-    refined = None
-    if refine is not None and not sim.success:
-        refined = _refine(hand, geometry, traj, robot, retargeter, refine, forces,
-                          calibrate_iterations, progress)  # fmt: skip
+        planned_sim, planned = sim, robot.q_command
+        sim, robot.q_command = calibrated.sim, calibrated.commands
     robot.meta["simulation"] = sim.meta
-    return PipelineResult(
+    result = PipelineResult(
         trajectory=traj, subject=subject, geometry=geometry, retargeter=retargeter, robot=robot,
-        sim=sim, setup_s=setup_s, human_sim=human_sim, replay=replay, calibration=calibrated,
-        planned_commands=planned, refined=refined,
+        sim=sim, resimulator=resim, setup_s=setup_s, human_sim=human_sim, replay=replay,
+        calibration=calibrated, planned_commands=planned, planned_sim=planned_sim,
     )  # fmt: skip
+    if refine is not None and not sim.success:
+        result.refined = refine_lost(result, refine, calibrate_iterations, progress)
+    return result
 
 
-def _refine(hand, geometry, traj, robot, retargeter, rcfg, forces, calibrate_iterations, progress):
-    """The physics refinement of a lost re-simulation, force-calibrated when force matching."""
+def refine_lost(
+    result: PipelineResult,
+    config: RefineConfig,
+    calibrate_iterations: int = 10,
+    progress: Progress | None = None,
+) -> RefineResult:
+    """The physics refinement (:func:`retarget.refine.refine`) of a run whose re-simulation
+    lost the object, with ``config`` (:func:`refine_config`); force-calibrated
+    (``calibrate_iterations`` replays, 0: none) when the run force-matches and the refinement
+    kept the object."""
+    hand, rt, traj, robot = result.hand, result.retargeter, result.trajectory, result.robot
     task = _task(progress, "refining (MPC on the robot)", 1)
-    refined = refine(hand, geometry, traj, robot, retargeter.tip_sites, rcfg)
+    refined = refine(hand, result.geometry, traj, robot, rt.tip_sites, config)
     if task is not None:
         task(1, 1)
-    if refined.success and forces and calibrate_iterations > 0:
+    if refined.success and rt.cfg.force_matching and calibrate_iterations > 0:
         n = calibrate_iterations
         task = _task(progress, f"calibrating the refined forces ({n} replays)", 1)
         refined = calibrate_refined(
-            hand, geometry, traj, robot, retargeter.tip_sites, refined, rcfg,
-            ForceCalibrationConfig(iterations=n), retargeter.cfg.force_scale,
+            hand, result.geometry, traj, robot, rt.tip_sites, refined, config,
+            ForceCalibrationConfig(iterations=n), rt.cfg.force_scale,
         )  # fmt: skip
         if task is not None:
             task(1, 1)

@@ -28,6 +28,7 @@ from benchmarks.force_preservation.config import (
 )
 from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.sim.pipeline import GRAVITY, simulate
+from dexcanvas_core.taxonomy import Pair
 from retarget.baselines import (
     DexRetargetingBaseline,
     DexRetargetingConfig,
@@ -35,18 +36,18 @@ from retarget.baselines import (
     measure_trajectory,
 )
 from retarget.errors import RetargetError
-from retarget.force_calibration import ForceCalibrationConfig, calibrate_forces
 from retarget.hands import get_hand
 from retarget.metrics import force_metrics, refined_force_metrics
 from retarget.pipeline import (
-    FORCE_CONTACT_TIMECONST,
     HUMAN_REPLAY_SEED,
     check_pair,
     human_sim_config,
+    refine_config,
+    refine_lost,
+    retarget_demonstration,
 )
-from retarget.refine import RefineConfig, calibrate_refined, refine
 from retarget.retargeter import RetargetConfig, Retargeter
-from retarget.validate import Resimulator, ValidateConfig
+from retarget.validate import Resimulator
 
 
 # ------------------------------------------------------------------------------------ workers
@@ -104,31 +105,33 @@ def _force_columns(human_force, robot_d, sim_res, human, retargeter, variant: st
     return m
 
 
-def _calibrated(rt, resim, robot, human, sim, m: dict, n: int) -> tuple[dict, object]:
-    """(d)'s force calibration (``retarget.force_calibration``) of ``robot`` (whose re-simulation is
-    ``sim``, metrics ``m``): the row's metrics and simulation become the chosen iterate's,
-    ``robot.q_command`` its commands; the planned commands' result stays in ``planned_*``."""
-
-    cal = calibrate_forces(rt, resim, robot, human, sim, ForceCalibrationConfig(iterations=n))
-    cm = cal.metrics()
-    out = {**m, **sim_metrics(cal.sim)}
-    out.update(
-        table_penetration_max_m=table_penetration(resim, cal.commands),
-        planned_success=m["success"],
-        planned_object_pos_err_max_m=m["object_pos_err_max_m"],
-        calibration_iterate=cm["chosen_iterate"],
-        calibration_s=cm["compute_s"],
-        calibration_force_error_before=cm["force_error_before"],
-        calibration_force_error_after=cm["force_error_after"],
-        calibration_finger_cmd_deviation_mean_rad=cm["finger_cmd_deviation_mean_rad"],
-    )
-    robot.q_command = cal.commands
-    return out, cal.sim
+def _pipeline_columns(res) -> dict:
+    """(d)'s row columns from its pipeline result (``retarget.pipeline.PipelineResult``): the
+    re-simulation's metrics and table penetration; with force calibration, the chosen
+    iterate's (its commands are ``res.robot.q_command``) and the planned commands' success
+    in ``planned_*``."""
+    out = {
+        "table_penetration_max_m": table_penetration(res.resimulator, res.robot.q_command),
+        **sim_metrics(res.sim),
+    }
+    if res.calibration is not None:
+        cm = res.calibration.metrics()
+        planned = sim_metrics(res.planned_sim)
+        out.update(
+            planned_success=planned["success"],
+            planned_object_pos_err_max_m=planned["object_pos_err_max_m"],
+            calibration_iterate=cm["chosen_iterate"],
+            calibration_s=cm["compute_s"],
+            calibration_force_error_before=cm["force_error_before"],
+            calibration_force_error_after=cm["force_error_after"],
+            calibration_finger_cmd_deviation_mean_rad=cm["finger_cmd_deviation_mean_rad"],
+        )
+    return out
 
 
 # -------------------------------------------------------------- one hand on one (pair, object)
-# The retargeting chain of variants (b)-(e): Retargeter -> Resimulator -> force calibration ->
-# refinement, in this one function (the benchmark's own copy of `retarget run`'s chain).
+# Variants (b), (c): the retargeter with other settings, re-simulated; (d), (e): the pipeline of
+# `retarget run --forces [--refine]` (retarget.pipeline).
 def _hand_job(args) -> list[dict]:
     """Worker: variants (a)–(d) of one hand on one (pair, object); one row per variant."""
 
@@ -152,33 +155,38 @@ def _hand_job(args) -> list[dict]:
             "c": RetargetConfig(**overrides),
             "d": RetargetConfig(**{**overrides, "force_matching": True}),
         }
-        for v in ("b", "c", "d"):
+        for v in ("b", "c"):
             row = rows[v]
             if v not in computed:
-                continue
-            if v == "d" and human is None:
-                row["skipped"] = "the force pipeline did not reproduce the demonstration"
                 continue
             t0 = time.perf_counter()
             try:
                 rt = Retargeter(hand, geom, configs[v])
-                src = human if v == "d" else traj
-                robot = rt.retarget(src)
-                sim = (
-                    Resimulator(
-                        hand, geom, ValidateConfig(contact_timeconst=FORCE_CONTACT_TIMECONST)
-                    )
-                    if v == "d"
-                    else resim_soft
-                )
-                m, sims[v] = resim_result(sim, robot.q_command, src)
+                robot = rt.retarget(traj)
+                m, sims[v] = resim_result(resim_soft, robot.q_command, traj)
                 retargeters[v] = rt
-                if v == "d":
-                    robot_d = robot
-                    if n_calibrate > 0 and sims[v] is not None:
-                        m, sims[v] = _calibrated(rt, sim, robot, src, sims[v], m, n_calibrate)
                 row.update(
                     ms_per_frame=robot.ms_per_frame, **KinematicMetrics.of(robot).summary(), **m
+                )
+            except Exception as e:  # one variant's failure is its own row's
+                row.update(error_record(e))
+            row["wall_s"] = time.perf_counter() - t0
+        # (d) force matching, force-calibrated: the pipeline of `retarget run --forces`
+        row = rows["d"]
+        if "d" in computed and human is None:
+            row["skipped"] = "the force pipeline did not reproduce the demonstration"
+        elif "d" in computed:
+            t0 = time.perf_counter()
+            try:
+                subject = Pair.parse(f"{base['object_id']}/{base['manipulation_type']}")
+                res_d = retarget_demonstration(
+                    human, subject, hand, configs["d"], calibrate_iterations=n_calibrate
+                )
+                robot_d, sims["d"], retargeters["d"] = res_d.robot, res_d.sim, res_d.retargeter
+                row.update(
+                    ms_per_frame=robot_d.ms_per_frame,
+                    **KinematicMetrics.of(robot_d).summary(),
+                    **_pipeline_columns(res_d),
                 )
             except Exception as e:  # one variant's failure is its own row's
                 row.update(error_record(e))
@@ -220,16 +228,8 @@ def _hand_job(args) -> list[dict]:
         else:
             t0 = time.perf_counter()
             try:
-                rcfg = RefineConfig(
-                    **{"contact_timeconst": FORCE_CONTACT_TIMECONST, **refine_overrides}
-                )
-                rf = refine(hand, geom, human, robot_d, retargeters["d"].tip_sites, rcfg)
-                if rf.success and n_calibrate > 0:
-                    rf = calibrate_refined(
-                        hand, geom, human, robot_d, retargeters["d"].tip_sites, rf, rcfg,
-                        ForceCalibrationConfig(iterations=n_calibrate),
-                        retargeters["d"].cfg.force_scale,
-                    )  # fmt: skip
+                rf = refine_lost(res_d, refine_config(True, **refine_overrides), n_calibrate)
+                if rf.calibration is not None:
                     cm = rf.calibration
                     row.update(
                         refine_calibration_iterate=cm["chosen_iterate"],
