@@ -9,12 +9,28 @@ triangle onto the observed one (Kabsch on the four points, exact for MANO-consis
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from pathlib import Path
+
 import numpy as np
 
 from dexcanvas_core.keypoints import MANO21, convert_keypoints
 from dexcanvas_core.rotations import matrix_to_aa
 from dexcanvas_core.trajectory import HandTrack, Trajectory
 from retarget.errors import RetargetError
+
+
+@dataclass(frozen=True)
+class KeypointsConfig:
+    """``retarget keypoints``: what :func:`run_keypoints` retargets and where it writes."""
+
+    hand: str
+    input: Path
+    fps: float
+    out: Path
+    order: str = "mano21"
+    units: str = "m"
+
 
 _PALM = [MANO21.index(k) for k in ("wrist", "index1", "middle1", "pinky1", "ring1")]
 
