@@ -610,7 +610,7 @@ def test_viz_replays_a_force_matching_run_exactly(human_with_forces, tmp_path):
     from dexcanvas_core.io import write_dataset
     from retarget.cli import main
     from retarget.hands import get_hand
-    from retarget.viz.data import record_resimulation
+    from retarget.viz.resim import record_resimulation
 
     traj = human_with_forces.slice(250, 400)
     src = tmp_path / "h.lance"

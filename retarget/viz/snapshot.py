@@ -18,9 +18,11 @@ No server or browser outlives the call (``_process``), also on errors.
 from __future__ import annotations
 
 import contextlib
+import ctypes.util
 import json
 import logging
 import os
+import sys
 import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -28,17 +30,15 @@ from typing import Literal
 
 import numpy as np
 
+from dexcanvas_core.demos.geometry import object_geometry
+from retarget.hands import get_hand
 from retarget.viz import chromium, images, mujoco_render
 from retarget.viz._process import run_process
-from retarget.viz.data import (
-    RunFiles,
-    SceneData,
-    load_human_for_run,
-    load_run,
-    record_resimulation,
-    scene_data,
-)
+from retarget.viz.data import RunFiles, SceneData, load_human_for_run, load_run, scene_data
 from retarget.viz.errors import RendererUnavailableError, VizError, require
+from retarget.viz.meshcat_connection import connect, meshcat_server
+from retarget.viz.meshcat_scene import MeshcatScene
+from retarget.viz.resim import record_resimulation
 from retarget.viz.view import SceneOptions, frame_scene, robot_body_positions
 
 log = logging.getLogger(__name__)
@@ -158,8 +158,6 @@ def frame_png(t: int) -> str:
 def mujoco_available() -> dict[str, str | None]:
     """Backend → None if its library is present, else the package hint (a fast check; the
     render itself is the real test)."""
-    import ctypes.util
-
     libs = {"egl": ("EGL",), "osmesa": ("OSMesa",)}
     return {
         b: None if all(ctypes.util.find_library(lib) for lib in libs[b]) else hint
@@ -214,8 +212,6 @@ def render_mujoco(
 ) -> list[Path]:
     """Stills of ``frames`` through MuJoCo's offscreen renderer (``MUJOCO_GL`` backends tried
     in turn, each in a fresh child process)."""
-    import sys
-
     framing = frame_scene(data, options, robot_body_positions(hand.compile(), data.robot_qpos))
     pngs = [out_dir / frame_png(t) for t in frames]
     forced = os.environ.get("MUJOCO_GL", "").strip().lower()
@@ -230,7 +226,7 @@ def render_mujoco(
                 env.setdefault("PYOPENGL_PLATFORM", "egl")
             elif backend == "osmesa":
                 env["PYOPENGL_PLATFORM"] = "osmesa"
-            args = [sys.executable, "-m", "retarget.viz.mujoco_render", str(job)]
+            args = [sys.executable, "-m", "retarget.viz.mujoco_child", str(job)]
             try:
                 r = run_process(args, timeout_s=MUJOCO_TIMEOUT_S, env=env)
             except Exception as e:
@@ -256,7 +252,6 @@ def _prepare(cfg: SnapshotConfig) -> tuple[RunFiles, object, list[int]]:
         run = load_run(cfg.run_dir)
         human = load_human_for_run(run)
         return run, human, choose_frames(cfg, run.num_frames)
-    from retarget.hands import get_hand
     from retarget.run import RunConfig, check_pair, load_subject, run_retarget
 
     hand = get_hand(cfg.hand)
@@ -282,9 +277,6 @@ def _prepare(cfg: SnapshotConfig) -> tuple[RunFiles, object, list[int]]:
 def run_snapshot(cfg: SnapshotConfig) -> dict:
     """Write the stills, ``scene.html`` and ``snapshots.json`` (module docstring); return the
     manifest."""
-    from dexcanvas_core.demos.geometry import object_geometry
-    from retarget.hands import get_hand
-
     cfg = cfg.validate()
     require("meshcat", "PIL")
     renderer = check_renderer(cfg.renderer)  # fail before the long part
@@ -314,8 +306,6 @@ def draw(
     run_dir: Path | None = None,
 ) -> dict:
     """Render ``frames`` of ``data`` into ``out_dir`` (+ ``scene.html`` and the manifest)."""
-    from retarget.viz.meshcat_scene import MeshcatScene, connect, meshcat_server
-
     options = cfg.options()
     frames = [int(t) for t in data.check_frames(frames)]
     out_dir = Path(out_dir)
