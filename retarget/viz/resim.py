@@ -35,7 +35,8 @@ class RobotSimRecord:
     """What :func:`record_resimulation` recorded, per data frame."""
 
     result: object
-    """The ``retarget.validate.ValidationResult`` (the run's metrics come from the same)."""
+    """The ``retarget.validation_result.ValidationResult`` (the run's metrics come from the
+    same)."""
     qpos: np.ndarray
     """(T, hand_nq) simulated hand joint positions at the end of each frame."""
     contacts: ContactFrames
