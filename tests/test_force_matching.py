@@ -132,7 +132,7 @@ def _coupledfinger_pressing_a_fixed_box():
                             pos=[0.09, 0, 0.1 - 0.008 - 0.02])  # fmt: skip
     eq = spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1="j2", name2="j1")
     eq.data[:5] = [0.0, 1.5, 0.0, 0.0, 0.0]
-    eq.solref = [0.005, 1.0]  # as the hands' linkages (retarget.hands.base)
+    eq.solref = [0.005, 1.0]  # as the hands' linkages (retarget.hands.build)
     a = spec.add_actuator(name="j1", target="j1", trntype=mujoco.mjtTrn.mjTRN_JOINT)
     a.set_to_position(kp=5.0, dampratio=1.0)
     for g in spec.geoms:

@@ -3,7 +3,7 @@
 ``run_snapshot(SnapshotConfig(out=..., hand="shadow", pair="cube2/tripod", frames=(0, 60)))``
 retargets the pair (``retarget.run.run_retarget``, its outputs go into ``out``) or reads an
 existing run directory (``run_dir=``), re-simulates it to record the robot's contacts
-(:func:`retarget.viz.data.record_resimulation`) and writes into ``out``:
+(:func:`retarget.viz.resim.record_resimulation`) and writes into ``out``:
 
 * ``frame_<t>.png`` for every chosen frame — by default rendered by headless Chromium from a
   ``static_html()`` page of the meshcat scene at that frame, else (``renderer='mujoco'``, or
