@@ -37,7 +37,8 @@ def _quat_wxyz(R: np.ndarray) -> np.ndarray:
 
 
 def build_spec(hand, *, self_collision: bool = False):
-    """A new ``mujoco.MjSpec``: floating wrist + the hand, sites, couplings, actuators.
+    """A new ``mujoco.MjSpec`` of ``hand`` (a :class:`~retarget.hands.model.HandModel`): floating
+    wrist + the hand, sites, couplings, actuators.
 
     ``self_collision``: let the hand's collision geoms touch each other (off by default;
     hand–object contacts are always on). Collision geoms use ``contype`` 2 and

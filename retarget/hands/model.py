@@ -182,15 +182,8 @@ class HandModel:
 
     # ------------------------------------------------------------------ model building
     def build_spec(self, *, self_collision: bool = False):
-        """A new ``mujoco.MjSpec``: floating wrist + the hand, sites, couplings, actuators.
-
-        ``self_collision``: let the hand's collision geoms touch each other (off by default;
-        hand–object contacts are always on). Collision geoms use ``contype`` 2 and
-        ``conaffinity`` 1, so they touch any geom with the default ``contype``/``conaffinity``
-        of 1 but not each other; with ``self_collision`` both are 3, the source's explicit
-        contact pairs are kept, and the body pairs already touching at the open posture (palm
-        and finger bases) are excluded.
-        """
+        """A new ``mujoco.MjSpec``: floating wrist + the hand, sites, couplings, actuators
+        (:func:`retarget.hands.build.build_spec`, which says what ``self_collision`` does)."""
         return build_spec(self, self_collision=self_collision)
 
     def compile(self):
