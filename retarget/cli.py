@@ -173,6 +173,7 @@ def _run_config(args: argparse.Namespace):
 
 
 def _plain_run_config(args: argparse.Namespace):
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.run import RunConfig
 
     return RunConfig(
@@ -236,6 +237,7 @@ def _add_snapshot_args(p: argparse.ArgumentParser) -> None:
 
 
 def _snapshot_config(args: argparse.Namespace):
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.viz.snapshot import SnapshotConfig, parse_frames
 
     return SnapshotConfig(
@@ -277,6 +279,7 @@ def _add_report_args(p: argparse.ArgumentParser) -> None:
 
 
 def _report_config(args: argparse.Namespace):
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.viz.report import ReportConfig
 
     return ReportConfig(
@@ -305,7 +308,7 @@ def _add_keypoints_args(p: argparse.ArgumentParser) -> None:
 def _keypoints_config(args: argparse.Namespace):
     if not args.fps > 0:
         raise SystemExit("retarget keypoints: error: --fps must be positive")
-    # Imported here, as the other commands' configs, for start-up time (``retarget --help``).
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.keypoint_input import KeypointsConfig
 
     return KeypointsConfig(args.hand, args.input, args.fps, args.out, args.order, args.units)
@@ -325,6 +328,7 @@ def _add_calibrate_args(p: argparse.ArgumentParser) -> None:
 
 
 def _calibrate_config(args: argparse.Namespace):
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.calibration import CalibrateConfig
 
     return CalibrateConfig(

@@ -32,12 +32,14 @@ def run_hands(cfg: HandsConfig) -> list[dict]:
 
     Returns the rows (``retarget.hands.hands_table()``).
     """
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.hands import hands_table
 
     rows = hands_table()
     if cfg.as_json:
         print(json.dumps(rows, indent=2, sort_keys=True))
         return rows
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
     from rich import box
     from rich.console import Console
     from rich.table import Table
@@ -85,9 +87,11 @@ class RunAndSnapshotConfig:
 
 def cmd_run(cfg) -> dict:
     """``retarget run``: :func:`retarget.run.run_retarget`, then the stills with ``--snapshot``."""
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.run import run_retarget
 
     if isinstance(cfg, RunAndSnapshotConfig):
+        # Lazy: start-up time of ``retarget --help`` (module docstring).
         from retarget.viz.snapshot import check_renderer, snapshot_run
 
         check_renderer(cfg.renderer)  # before the long part
@@ -127,6 +131,7 @@ def _print_snapshot(manifest: dict, out_dir: Path) -> None:
 
 def cmd_snapshot(cfg) -> dict:
     """``retarget snapshot``: :func:`retarget.viz.snapshot.run_snapshot`; prints the files."""
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.viz.snapshot import run_snapshot
 
     with _sigterm_as_exit():
@@ -138,6 +143,7 @@ def cmd_snapshot(cfg) -> dict:
 
 def cmd_report(cfg) -> Path:
     """``retarget report``: :func:`retarget.viz.report.run_report`; prints the page's path."""
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.viz.report import run_report
 
     with _sigterm_as_exit():
@@ -148,6 +154,7 @@ def cmd_report(cfg) -> Path:
 
 def cmd_keypoints(cfg) -> dict:
     """``retarget keypoints``: :func:`retarget.keypoint_input.run_keypoints`."""
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.keypoint_input import run_keypoints
 
     return run_keypoints(cfg)
@@ -155,6 +162,7 @@ def cmd_keypoints(cfg) -> dict:
 
 def cmd_calibrate(cfg) -> object:
     """``retarget calibrate-wrist``: :func:`retarget.calibration.run_calibrate`."""
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.calibration import run_calibrate
 
     return run_calibrate(cfg)
