@@ -42,13 +42,24 @@ Run ``retarget calibrate-wrist --hand NAME``; it prints the ``WristOffset(...)``
 from __future__ import annotations
 
 import dataclasses
+import json
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+from scipy.spatial.transform import Rotation
 
+from dexcanvas_core.demos import feasible_pairs, generate_demo, spread_pairs
+from dexcanvas_core.demos import operator as operator_by_name
+from dexcanvas_core.demos.geometry import object_geometry
 from retarget.errors import RetargetError
+from retarget.hands import get_hand
+from retarget.hands.base import WRIST_JOINTS, WRIST_SITE
+from retarget.pipeline import check_pair
+from retarget.retargeter import RetargetConfig, Retargeter
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +73,6 @@ CALIBRATION_SKIP = 40
 @dataclass(frozen=True)
 class WristCalibration:
     """The measured offset and how well one constant offset describes the frames."""
-
     hand: str
     rotvec: np.ndarray
     """(3,) [rad] mean robot wrist rotation in the human wrist frame (rotation vector)."""
@@ -124,10 +134,6 @@ def calibration_demos(
     """``n_pairs`` generated demonstrations ``[(pair, trajectory)]`` the hand can perform: the
     benchmarks' group-spread order of the feasible pairs (``spread_pairs``) from its ``skip``-th
     pair on, each cropped to ``max_frames`` (``Trajectory.crop``, as the benchmarks do)."""
-    from dexcanvas_core.demos import feasible_pairs, generate_demo, spread_pairs
-    from dexcanvas_core.demos import operator as operator_by_name
-    from retarget.pipeline import check_pair
-
     if n_pairs < 1:
         raise RetargetError("calibration needs at least one demonstration pair")
     operator_by_name(operator)  # an unknown name fails here, naming the known ones
@@ -159,8 +165,6 @@ def wrist_in_target_frame(retargeter, traj, Q: np.ndarray, targets: dict | None 
     """Per frame, the robot wrist site's pose in the frame of ``retargeter``'s wrist targets
     (the human wrist pose when ``use_wrist_offset`` is off or the hand has no offset):
     ``(rotations (T, 3, 3), positions (T, 3) [m])``."""
-    from retarget.hands.base import WRIST_SITE
-
     tg = retargeter.human_targets(traj) if targets is None else targets
     R_h, p_h = tg["wrist_R"], tg["wrist_p"]
     Q = np.asarray(Q, dtype=np.float64)
@@ -181,8 +185,6 @@ def proximal_joints(retargeter) -> list[str]:
     """The hand's own joints proximal to every keypoint site (Shadow's WRJ1 and WRJ0): with the
     floating wrist free they are redundant for the keypoints, so a wrist-free solve could turn
     them instead of the wrist."""
-    from retarget.hands.base import WRIST_JOINTS
-
     m = retargeter.scene.model
 
     def chain(body: int) -> set[int]:
@@ -207,11 +209,6 @@ def calibrate_wrist(
     """Measure ``hand``'s wrist offset on ``demos`` (``[(pair, trajectory)]``; see the module
     docstring). ``on_pair`` is called with each pair's name once it is solved; ``seed``, the
     demonstrations' seed, only goes into the ``source`` note."""
-    from scipy.spatial.transform import Rotation
-
-    from dexcanvas_core.demos.geometry import object_geometry
-    from retarget.retargeter import RetargetConfig, Retargeter
-
     cfg = RetargetConfig(
         w_wrist_pos=0.0, w_wrist_rot=0.0, w_posture=0.0, w_smooth=0.0, use_contacts=False,
         use_collision=False, use_self_collision=False, use_wrist_offset=False,
@@ -264,7 +261,6 @@ def calibrate_wrist(
 @dataclass(frozen=True)
 class CalibrateConfig:
     """``retarget calibrate-wrist``."""
-
     hand: str
     n_pairs: int = 8
     operator: str = CALIBRATION_OPERATOR
@@ -276,13 +272,6 @@ class CalibrateConfig:
 def run_calibrate(cfg: CalibrateConfig) -> WristCalibration:
     """Generate the demonstrations, measure the offset, print it (a table and the field to paste,
     or JSON)."""
-    import json
-
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
-
-    from retarget.hands import get_hand
-
     hand = get_hand(cfg.hand)
     console = Console(stderr=cfg.as_json)
     cols = ("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),

@@ -2,7 +2,9 @@
 
 A thin layer: each sub-command parses into a frozen config dataclass and calls one ``run_*``
 function that library users can call too. Sub-commands are entries of ``COMMANDS``: a new one
-(``run``, ``validate``, …) adds its config, its ``run_*`` function and one ``Command`` entry.
+(``run``, ``validate``, …) adds its arguments and config here, the function running it in
+:mod:`retarget.cli_commands`, and one ``Command`` entry. The configs' modules are imported inside
+the functions that make them, for start-up time (``retarget --help`` needs none of them).
 Errors of the toolkit are printed as one line, ``retarget <command>: error: <message>``, and give
 exit code 2.
 """
@@ -10,13 +12,9 @@ exit code 2.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import json
 import logging
 import math
-import signal
 import sys
-import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,69 +22,20 @@ from pathlib import Path
 from dexcanvas_core.errors import DexCanvasError
 from dexcanvas_core.objects.options import add_object_options, use_object_options
 from retarget import __version__
+from retarget.cli_commands import (
+    HandsConfig,
+    RunAndSnapshotConfig,
+    cmd_calibrate,
+    cmd_keypoints,
+    cmd_report,
+    cmd_run,
+    cmd_snapshot,
+    run_hands,
+)
 from retarget.errors import RetargetError
 from retarget.overrides import parse_override
 
 # ---------------------------------------------------------------------------- retarget hands
-
-
-@dataclass(frozen=True)
-class HandsConfig:
-    """``retarget hands``: list the registered robot hands."""
-
-    as_json: bool = False
-    """Print a JSON list (one object per hand) instead of a table."""
-
-
-def _fingers_cell(fingers: dict) -> str:
-    return ",".join(r or "–" for r in fingers.values())
-
-
-def run_hands(cfg: HandsConfig) -> list[dict]:
-    """Print every registered hand with its DoF, actuators, finger mapping and model source.
-
-    Returns the rows (``retarget.hands.hands_table()``).
-    """
-    from retarget.hands import hands_table
-
-    rows = hands_table()
-    if cfg.as_json:
-        print(json.dumps(rows, indent=2, sort_keys=True))
-        return rows
-    from rich import box
-    from rich.console import Console
-    from rich.table import Table
-
-    t = Table(title="robot hands (--hand NAME)", box=box.SIMPLE_HEAD)
-    t.add_column("hand", style="bold")
-    t.add_column("DoF", justify="right")
-    t.add_column("act.", justify="right")
-    t.add_column("coupl.", justify="right")
-    t.add_column("thumb,index,middle,ring,pinky →", no_wrap=True)
-    t.add_column("scale", justify="right")
-    t.add_column("source", no_wrap=True)
-    t.add_column("licence")
-    for r in rows:
-        t.add_row(
-            r["name"],
-            f"{r['dof_wrist']}+{r['dof_fingers']}",
-            f"{r['dof_wrist']}+{r['actuators_fingers']}",
-            str(r["couplings"]),
-            _fingers_cell(r["fingers"]),
-            f"{r['scale']:.2f}",
-            r["source"],
-            r["licence"],
-        )
-    con = Console()
-    if not con.is_terminal:  # piped: do not squeeze the table into 80 columns
-        con = Console(width=120)
-    con.print(t)
-    con.print(
-        "DoF, act.: 6 floating-wrist + the hand's joints / actuators; coupl.: tendon and "
-        "equality couplings;\nfingers: the robot finger each human finger drives (– dropped); "
-        "scale: robot/human hand size"
-    )
-    return rows
 
 
 def _add_hands_args(p: argparse.ArgumentParser) -> None:
@@ -216,15 +165,6 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
     )
 
 
-@dataclass(frozen=True)
-class RunAndSnapshotConfig:
-    """``retarget run --snapshot``: the run, then stills of it into its directory."""
-
-    run: object
-    """The ``retarget.pipeline.RunConfig``."""
-    renderer: str = "auto"
-
-
 def _run_config(args: argparse.Namespace):
     cfg = _plain_run_config(args)
     if getattr(args, "snapshot", False):
@@ -233,6 +173,7 @@ def _run_config(args: argparse.Namespace):
 
 
 def _plain_run_config(args: argparse.Namespace):
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.pipeline import RunConfig
 
     return RunConfig(
@@ -254,41 +195,7 @@ def _plain_run_config(args: argparse.Namespace):
     )
 
 
-def _run(cfg) -> dict:
-    from retarget.run import run_retarget
-
-    if isinstance(cfg, RunAndSnapshotConfig):
-        from retarget.viz.snapshot import check_renderer, snapshot_run
-
-        check_renderer(cfg.renderer)  # before the long part
-        metrics = run_retarget(cfg.run)
-        with _sigterm_as_exit():
-            manifest = snapshot_run(cfg.run.output_dir(), renderer=cfg.renderer)
-        if cfg.run.progress:
-            _print_snapshot(manifest, cfg.run.output_dir())
-        return metrics
-    return run_retarget(cfg)
-
-
 # ---------------------------------------------------------------------------- retarget snapshot
-
-
-@contextlib.contextmanager
-def _sigterm_as_exit():
-    """Turn SIGTERM into SystemExit while the block runs, so that the ``with`` blocks holding
-    child processes (meshcat server, Chromium, MuJoCo renderer) end them on ``kill`` too."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def handler(signum, frame):
-        raise SystemExit(128 + signum)
-
-    previous = signal.signal(signal.SIGTERM, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 def _add_snapshot_args(p: argparse.ArgumentParser) -> None:
@@ -330,6 +237,7 @@ def _add_snapshot_args(p: argparse.ArgumentParser) -> None:
 
 
 def _snapshot_config(args: argparse.Namespace):
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.viz.snapshot import SnapshotConfig, parse_frames
 
     return SnapshotConfig(
@@ -352,23 +260,6 @@ def _snapshot_config(args: argparse.Namespace):
     ).validate()
 
 
-def _print_snapshot(manifest: dict, out_dir: Path) -> None:
-    files = ", ".join(manifest["files"])
-    print(f"{len(manifest['files'])} still(s) by {manifest['renderer']} in {out_dir}: {files}")
-    if manifest.get("scene_html"):
-        print(f"animated scene: {out_dir / manifest['scene_html']}")
-
-
-def _snapshot(cfg) -> dict:
-    from retarget.viz.snapshot import run_snapshot
-
-    with _sigterm_as_exit():
-        manifest = run_snapshot(cfg)
-    if cfg.progress:
-        _print_snapshot(manifest, Path(cfg.out))
-    return manifest
-
-
 # ---------------------------------------------------------------------------- retarget report
 
 
@@ -388,6 +279,7 @@ def _add_report_args(p: argparse.ArgumentParser) -> None:
 
 
 def _report_config(args: argparse.Namespace):
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.viz.report import ReportConfig
 
     return ReportConfig(
@@ -397,25 +289,6 @@ def _report_config(args: argparse.Namespace):
         renderer=args.renderer,
         plot_format=args.plot_format,
     ).validate()
-
-
-def _report(cfg) -> Path:
-    from retarget.viz.report import run_report
-
-    with _sigterm_as_exit():
-        out = run_report(cfg)
-    print(f"report: {out}")
-    return out
-
-
-@dataclass(frozen=True)
-class KeypointsConfig:
-    hand: str
-    input: Path
-    fps: float
-    out: Path
-    order: str = "mano21"
-    units: str = "m"
 
 
 def _add_keypoints_args(p: argparse.ArgumentParser) -> None:
@@ -432,16 +305,13 @@ def _add_keypoints_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="output directory")  # fmt: skip
 
 
-def _keypoints_config(args: argparse.Namespace) -> KeypointsConfig:
+def _keypoints_config(args: argparse.Namespace):
     if not args.fps > 0:
         raise SystemExit("retarget keypoints: error: --fps must be positive")
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
+    from retarget.keypoint_input import KeypointsConfig
+
     return KeypointsConfig(args.hand, args.input, args.fps, args.out, args.order, args.units)
-
-
-def _keypoints(cfg: KeypointsConfig) -> dict:
-    from retarget.keypoint_input import run_keypoints
-
-    return run_keypoints(cfg)
 
 
 # ------------------------------------------------------------------ retarget calibrate-wrist
@@ -458,17 +328,12 @@ def _add_calibrate_args(p: argparse.ArgumentParser) -> None:
 
 
 def _calibrate_config(args: argparse.Namespace):
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.calibration import CalibrateConfig
 
     return CalibrateConfig(
         args.hand, args.pairs, args.operator, args.seed, args.max_frames or None, args.json
     )
-
-
-def _calibrate(cfg) -> object:
-    from retarget.calibration import run_calibrate
-
-    return run_calibrate(cfg)
 
 
 # ---------------------------------------------------------------------------- command table
@@ -490,7 +355,7 @@ COMMANDS: dict[str, Command] = {
         help="retarget a demonstration onto a robot hand, re-simulate it, write metrics",
         add_arguments=_add_run_args,
         make_config=_run_config,
-        run=_run,
+        run=cmd_run,
     ),
     "hands": Command(
         help="list the robot hands: DoF, actuators, finger mapping, model source",
@@ -502,25 +367,25 @@ COMMANDS: dict[str, Command] = {
         help="retarget a bare 21-keypoint sequence (video or teleoperation; no object)",
         add_arguments=_add_keypoints_args,
         make_config=_keypoints_config,
-        run=_keypoints,
+        run=cmd_keypoints,
     ),
     "calibrate-wrist": Command(
         help="measure a hand's wrist offset from the human wrist (for HandModel.wrist_offset)",
         add_arguments=_add_calibrate_args,
         make_config=_calibrate_config,
-        run=_calibrate,
+        run=cmd_calibrate,
     ),
     "snapshot": Command(
         help="stills of chosen frames (headless Chromium or MuJoCo) and the scene as HTML",
         add_arguments=_add_snapshot_args,
         make_config=_snapshot_config,
-        run=_snapshot,
+        run=cmd_snapshot,
     ),
     "report": Command(
         help="one offline HTML page of runs: metrics, stills, force and error plots, heatmap",
         add_arguments=_add_report_args,
         make_config=_report_config,
-        run=_report,
+        run=cmd_report,
     ),
 }
 

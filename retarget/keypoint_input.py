@@ -9,12 +9,33 @@ triangle onto the observed one (Kabsch on the four points, exact for MANO-consis
 
 from __future__ import annotations
 
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
 import numpy as np
 
 from dexcanvas_core.keypoints import MANO21, convert_keypoints
+from dexcanvas_core.mano import HandSkeleton
 from dexcanvas_core.rotations import matrix_to_aa
 from dexcanvas_core.trajectory import HandTrack, Trajectory
 from retarget.errors import RetargetError
+from retarget.hands import get_hand
+from retarget.retargeter import Retargeter
+
+
+@dataclass(frozen=True)
+class KeypointsConfig:
+    """``retarget keypoints``: what :func:`run_keypoints` retargets and where it writes."""
+
+    hand: str
+    input: Path
+    fps: float
+    out: Path
+    order: str = "mano21"
+    units: str = "m"
+
 
 _PALM = [MANO21.index(k) for k in ("wrist", "index1", "middle1", "pinky1", "ring1")]
 
@@ -44,8 +65,6 @@ def keypoints_to_trajectory(
         fps: frame rate [Hz].
         order: ``"mano21"`` or ``"openpose21"``.
     """
-    from dexcanvas_core.mano import HandSkeleton
-
     kp = np.asarray(keypoints, dtype=np.float64)
     if kp.ndim != 3 or kp.shape[1:] != (21, 3):
         raise RetargetError(f"keypoints must have shape (T, 21, 3), got {kp.shape}")
@@ -75,8 +94,6 @@ def keypoints_to_trajectory(
 
 def retarget_keypoints(hand, keypoints: np.ndarray, fps: float, order: str = "mano21", config=None):
     """Retarget a bare keypoint sequence onto ``hand`` (no object): a ``RobotTrajectory``."""
-    from retarget.retargeter import Retargeter
-
     traj = keypoints_to_trajectory(keypoints, fps, order)
     return Retargeter(hand, None, config).retarget(traj)
 
@@ -84,8 +101,6 @@ def retarget_keypoints(hand, keypoints: np.ndarray, fps: float, order: str = "ma
 def load_keypoints(path, units: str = "m") -> np.ndarray:
     """``(T, 21, 3)`` keypoints [m] from ``.npy`` (the array), ``.npz`` (key ``keypoints``) or
     ``.csv`` (one frame per row, 63 columns x0, y0, z0, x1, …; a header row is skipped)."""
-    from pathlib import Path
-
     path = Path(path)
     scale = {"m": 1.0, "cm": 0.01, "mm": 0.001}.get(units)
     if scale is None:
@@ -126,11 +141,6 @@ def load_keypoints(path, units: str = "m") -> np.ndarray:
 
 def run_keypoints(cfg) -> dict:
     """``retarget keypoints``: retarget a keypoint file; write the trajectory and metrics."""
-    import json
-    import os
-
-    from retarget.hands import get_hand
-
     kp = load_keypoints(cfg.input, cfg.units)
     hand = get_hand(cfg.hand)
     robot = retarget_keypoints(hand, kp, cfg.fps, cfg.order)

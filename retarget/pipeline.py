@@ -12,7 +12,6 @@ object) → :class:`PipelineResult`. ``retarget run`` is this plus the run metri
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,7 +36,13 @@ from retarget.overrides import build_config
 from retarget.progress import Progress
 from retarget.refine import RefineConfig, RefineResult, calibrate_refined, refine
 from retarget.retargeter import RetargetConfig, Retargeter, RobotTrajectory
-from retarget.validate import Resimulator, ValidateConfig, ValidationResult
+from retarget.time_scale import check_time_scale, time_scaled
+from retarget.validate import (
+    FORCE_CONTACT_TIMECONST,
+    Resimulator,
+    ValidateConfig,
+    ValidationResult,
+)
 
 
 @dataclass(frozen=True)
@@ -106,38 +111,6 @@ class RunConfig:
         return Path("runs") / f"{self.hand}_{obj}_{typ}_{self.index}"
 
 
-MAX_TIME_SCALE = 10.0
-"""The slowest execution ``RunConfig.time_scale`` allows (a 6 s demonstration in a minute)."""
-
-
-def check_time_scale(scale) -> float:
-    """``scale`` (a number or its text) as a float if it is a finite number from 1 to
-    ``MAX_TIME_SCALE``; else a one-line :class:`RetargetError` saying so."""
-    try:
-        s = float(scale)
-    except (TypeError, ValueError):
-        s = float("nan")
-    if not (np.isfinite(s) and 1.0 <= s <= MAX_TIME_SCALE):
-        raise RetargetError(
-            f"--time-scale must be a finite number from 1 to {MAX_TIME_SCALE:g} (the "
-            f"demonstration is executed that many times slower), got {str(scale)!r}"
-        )
-    return s
-
-
-def time_scaled(traj, scale: float):
-    """``traj`` executed ``scale`` (≥ 1) times slower: timestamps stretched about the first,
-    frame rate divided by ``scale``, everything else (frames, poses, contact records, uuid)
-    unchanged. ``scale`` 1: ``traj`` itself."""
-    scale = check_time_scale(scale)
-    if scale == 1.0:
-        return traj
-    t0 = traj.timestamp[0]
-    return dataclasses.replace(
-        traj, timestamp=t0 + scale * (traj.timestamp - t0), fps=traj.fps / scale
-    )
-
-
 def check_pair(hand, manipulation_type) -> None:
     """Raise if the hand cannot perform this manipulation type at all.
 
@@ -155,16 +128,6 @@ def check_pair(hand, manipulation_type) -> None:
             f"needs independently driven fingers and {hand.name} has {finger_actuators} finger "
             "actuator(s); pick a dexterous hand (retarget hands)"
         )
-
-
-FORCE_CONTACT_TIMECONST = 0.02
-"""Contact solref time constant [s] of force-matching re-simulations: the force pipeline's own
-(``dexcanvas_core.sim.scene.PhysicsSettings.solref``), so the robot presses the object through
-the contact model the human's forces were measured with. Soft contacts give a little: a finger
-pressing ``K⁻¹Jᵀf`` into them presses 60–90 % of ``f``, and the force calibration
-(:mod:`retarget.force_calibration`) makes up the rest (``docs/method.md``, force matching).
-Every hand's and object's collision geoms already carry this ``solref``, so the override's one
-remaining effect is zero contact margin. Pinned to the pipeline's by a test."""
 
 
 HUMAN_REPLAY_SEED = 1

@@ -7,7 +7,7 @@ Training code computes robot keypoints and retargeting losses on any device:
     loss = ((p - targets) ** 2).sum()   # differentiable w.r.t. q
 
 The chain is built from the same compiled ``MjModel`` as every other backend: it is exported to
-a kinematic URDF (``retarget.baselines.dex_retargeting.export_urdf``, exact to double precision)
+a kinematic URDF (``retarget.urdf_export.export_urdf``, exact to double precision)
 and loaded with ``pytorch_kinematics``; every joint is independent (couplings are the caller's
 business, as for ``qpos``), and every MuJoCo site is a frame of the chain.
 """
@@ -21,6 +21,7 @@ from pathlib import Path
 import torch
 
 from retarget.errors import RetargetError
+from retarget.urdf_export import export_urdf
 
 
 class TorchHandFK:
@@ -30,8 +31,6 @@ class TorchHandFK:
         self, hand, device: str | torch.device = "cpu", dtype: torch.dtype = torch.float32
     ):
         import pytorch_kinematics as pk
-
-        from retarget.baselines.dex_retargeting import export_urdf
 
         model = hand.compile()
         with tempfile.TemporaryDirectory() as tmp:

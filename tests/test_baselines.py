@@ -10,10 +10,10 @@ import pytest
 from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.example import example_trajectories
 from retarget.baselines import KinematicMetrics, measure_trajectory
-from retarget.baselines.dex_retargeting import export_urdf, model_couplings
 from retarget.errors import RetargetError
 from retarget.hands import available_hands, get_hand
 from retarget.retargeter import Retargeter
+from retarget.urdf_export import export_urdf, model_couplings
 
 # Exercises what the exporter must get right beyond the real hands: a body with several joints
 # whose hinge anchors are off the body origin, a rotated body at a 90° pitch (gimbal lock of

@@ -140,9 +140,8 @@ def shadow_force_matched():
     from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.sim.pipeline import SimConfig, simulate
     from retarget.hands import get_hand
-    from retarget.pipeline import FORCE_CONTACT_TIMECONST
     from retarget.retargeter import RetargetConfig, Retargeter
-    from retarget.validate import Resimulator, ValidateConfig
+    from retarget.validate import FORCE_CONTACT_TIMECONST, Resimulator, ValidateConfig
 
     demo = generate_demo("cube2/tripod", "operator1", seed=0).trajectory
     human = simulate(demo, SimConfig(tracker="open_loop")).trajectory
@@ -207,8 +206,8 @@ def test_refined_targets_are_calibrated_in_the_refinement_scene(shadow_force_mat
     from dataclasses import replace
 
     from retarget.force_calibration import force_error
-    from retarget.pipeline import FORCE_CONTACT_TIMECONST
     from retarget.refine import RefineConfig, calibrate_refined, refine
+    from retarget.validate import FORCE_CONTACT_TIMECONST
 
     rt, _, robot, human = shadow_force_matched
     human = human.slice(0, 360)  # the grasp and the lift

@@ -133,7 +133,7 @@ def _coupledfinger_pressing_a_fixed_box():
                             pos=[0.09, 0, 0.1 - 0.008 - 0.02])  # fmt: skip
     eq = spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1="j2", name2="j1")
     eq.data[:5] = [0.0, 1.5, 0.0, 0.0, 0.0]
-    eq.solref = [0.005, 1.0]  # as the hands' linkages (retarget.hands.base)
+    eq.solref = [0.005, 1.0]  # as the hands' linkages (retarget.hands.build)
     a = spec.add_actuator(name="j1", target="j1", trntype=mujoco.mjtTrn.mjTRN_JOINT)
     a.set_to_position(kp=5.0, dampratio=1.0)
     for g in spec.geoms:
@@ -175,7 +175,7 @@ def test_soft_default_contacts_press_less_than_commanded():
     re-simulations' (``FORCE_CONTACT_TIMECONST``), the finger sinks into the box and the servo
     loses part of its deflection: what the force calibration corrects."""
     from dexcanvas_core.sim.scene import PhysicsSettings
-    from retarget.pipeline import FORCE_CONTACT_TIMECONST
+    from retarget.validate import FORCE_CONTACT_TIMECONST
 
     assert FORCE_CONTACT_TIMECONST == PhysicsSettings().solref[0] == 0.02
     m = finger_pressing_a_fixed_box(solref=0.02)
@@ -612,7 +612,7 @@ def test_viz_replays_a_force_matching_run_exactly(human_with_forces, tmp_path):
     from dexcanvas_core.io import write_dataset
     from retarget.cli import main
     from retarget.hands import get_hand
-    from retarget.viz.data import record_resimulation
+    from retarget.viz.resim import record_resimulation
 
     traj = human_with_forces.slice(250, 400)
     src = tmp_path / "h.lance"

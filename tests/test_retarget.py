@@ -428,8 +428,10 @@ def test_cli_run_time_scale_slows_the_demonstration_and_says_so(small_dataset, t
     """``retarget run --time-scale 2`` executes the demonstration twice as slowly: the same
     frames at half the rate, recorded in metrics.json and on the terminal; a replay of the run
     (``retarget.viz``) stretches it alike and reproduces the re-simulation."""
-    from retarget.pipeline import RunConfig, time_scaled
-    from retarget.viz.data import load_human_for_run, load_run, record_resimulation
+    from retarget.pipeline import RunConfig
+    from retarget.time_scale import time_scaled
+    from retarget.viz.data import load_human_for_run, load_run
+    from retarget.viz.resim import record_resimulation
 
     out = tmp_path / "slow"
     argv = ["run", "--hand", "allegro", "--pair", "cube2/tripod", "--dataset",

@@ -29,21 +29,11 @@ from retarget.cli import main
 from retarget.hands import get_hand
 from retarget.viz import chromium, style
 from retarget.viz._process import tagged_processes
-from retarget.viz.data import (
-    ContactFrames,
-    infer_contacts,
-    load_human_for_run,
-    load_run,
-    record_resimulation,
-    robot_body_parts,
-    scene_data,
-)
-from retarget.viz.meshcat_scene import (
-    MeshcatScene,
-    connect,
-    listening_addresses,
-    meshcat_server,
-)
+from retarget.viz.contacts import ContactFrames, infer_contacts, robot_body_parts
+from retarget.viz.data import load_human_for_run, load_run, scene_data
+from retarget.viz.meshcat_connection import connect, listening_addresses, meshcat_server
+from retarget.viz.meshcat_scene import MeshcatScene
+from retarget.viz.resim import record_resimulation
 from retarget.viz.view import SceneOptions
 
 HAS_CHROMIUM = chromium.find_chromium() is not None

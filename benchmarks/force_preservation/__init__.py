@@ -39,7 +39,7 @@ Per hand (``--hands``, default every registered hand; a hand skips pairs it cann
   inferred from its geometry as in (c), the human's per-finger forces from its records →
   force-distribution QP → ``K⁻¹Jᵀf`` offsets),
   re-simulated on ``q_command`` with the force pipeline's contacts
-  (``retarget.pipeline.FORCE_CONTACT_TIMECONST``, 20 ms: the default contacts (a)–(c) have too),
+  (``retarget.validate.FORCE_CONTACT_TIMECONST``, 20 ms: the default contacts (a)–(c) have too),
   then force-calibrated as ``retarget run --forces`` does (``retarget.force_calibration``,
   ``--calibrate-iterations``, default 10; 0: the planned commands): the row is the chosen
   iterate's, with the planned commands' success in ``planned_success``;

@@ -2,7 +2,7 @@
 
 * :mod:`retarget.baselines.dex_retargeting` — dex-retargeting's position retargeting (PyPI,
   the ``bench`` extra) on a URDF exported from a hand's ``MjModel``
-  (:class:`DexRetargetingBaseline`, :func:`export_urdf`).
+  (:class:`DexRetargetingBaseline`; the URDF: :func:`retarget.urdf_export.export_urdf`).
 * :func:`measure_trajectory` — the per-frame numbers a :class:`~retarget.retargeter.
   RobotTrajectory` carries (keypoint error, hand–object and finger–finger distances, contact
   error), computed with the same definitions and the same scene for *any* joint trajectory, so
@@ -21,8 +21,6 @@ from retarget.baselines.dex_retargeting import (
     BaselineTrajectory,
     DexRetargetingBaseline,
     DexRetargetingConfig,
-    UrdfExport,
-    export_urdf,
 )
 from retarget.errors import RetargetError
 
@@ -99,7 +97,5 @@ __all__ = [
     "DexRetargetingBaseline",
     "DexRetargetingConfig",
     "KinematicMetrics",
-    "UrdfExport",
-    "export_urdf",
     "measure_trajectory",
 ]

@@ -6,10 +6,10 @@
 >>> hand.keypoint_map["index_tip"]         # MANO21 keypoint -> robot site
 'ff_tip_site'
 
-Adding a hand is one module in this package that defines ``HAND = HandModel(...)`` (see
-``shadow.py`` for a package-sourced model, ``leap.py`` for one authored in ``robots/``); the
-registry finds it by itself. Out-of-tree hands call :func:`register` or declare an entry point in
-the ``dexcanvas_retarget.hands`` group.
+Adding a hand is one module in this package that defines ``HAND = HandModel(...)``
+(:mod:`retarget.hands.model`; see ``shadow.py`` for a package-sourced model, ``leap.py`` for one
+authored in ``robots/``); the registry finds it by itself. Out-of-tree hands call :func:`register`
+or declare an entry point in the ``dexcanvas_retarget.hands`` group.
 """
 
 from retarget.hands.base import (
@@ -19,7 +19,6 @@ from retarget.hands.base import (
     WRIST_SITE,
     ActuatorSpec,
     ContactParams,
-    HandModel,
     JointCoupling,
     ModelSource,
     SitePlacement,
@@ -28,6 +27,7 @@ from retarget.hands.base import (
     WristOffset,
     wrist_qpos_from_mano,
 )
+from retarget.hands.model import HandModel
 from retarget.hands.registry import (
     available_hands,
     get_hand,

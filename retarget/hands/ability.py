@@ -21,14 +21,14 @@ from __future__ import annotations
 
 from retarget.hands.base import (
     ActuatorSpec,
-    HandModel,
     JointCoupling,
     ModelSource,
     SitePlacement,
     WristAlignment,
     WristOffset,
-    package_path,
 )
+from retarget.hands.model import HandModel
+from retarget.hands.sources import package_path
 
 _PSYONIC = "psyonicinc/ability-hand-api URDF/mujoco/hands/abh_right_large.xml"
 # PIP-MCP linkage, linear fit: psyonicinc/ability-hand-api URDF/mujoco/README.md

@@ -26,14 +26,13 @@ from __future__ import annotations
 
 from retarget.hands.base import (
     ActuatorSpec,
-    HandModel,
     ModelSource,
     SitePlacement,
     WristAlignment,
     WristOffset,
-    example_robot_data_path,
-    urdf_with_mujoco_compiler,
 )
+from retarget.hands.model import HandModel
+from retarget.hands.sources import example_robot_data_path, urdf_with_mujoco_compiler
 
 # MuJoCo Menagerie wonik_allegro/right_hand.xml: <position kp="10"/>, <joint damping="1"/>
 KP = 10.0  # [N·m/rad]

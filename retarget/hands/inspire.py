@@ -18,13 +18,13 @@ from __future__ import annotations
 
 from retarget.hands.base import (
     ActuatorSpec,
-    HandModel,
     ModelSource,
     SitePlacement,
     WristAlignment,
     WristOffset,
-    robots_dir,
 )
+from retarget.hands.model import HandModel
+from retarget.hands.sources import robots_dir
 
 # Force limits from measured fingertip forces (Correll lab, correlllab/rh56_controller README:
 # index ≈ 7.06 N, middle ≈ 6.47 N, thumb bend ≈ 12.93 N at the maximum force setting) times the

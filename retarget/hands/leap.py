@@ -20,13 +20,13 @@ from __future__ import annotations
 
 from retarget.hands.base import (
     ActuatorSpec,
-    HandModel,
     ModelSource,
     SitePlacement,
     WristAlignment,
     WristOffset,
-    robots_dir,
 )
+from retarget.hands.model import HandModel
+from retarget.hands.sources import robots_dir
 
 # LEAP_Hand_Sim leapsim/cfg/task/LeapHandRot.yaml: controller pgain 3, dgain 0.1
 KP = 3.0  # [N·m/rad]

@@ -19,15 +19,9 @@ distal = +z, radial (thumb side) = +y, "volar" = radial × distal = +x. Wrist po
 
 from __future__ import annotations
 
-from retarget.hands.base import (
-    ActuatorSpec,
-    HandModel,
-    ModelSource,
-    SitePlacement,
-    WristAlignment,
-    example_robot_data_path,
-    urdf_with_mujoco_compiler,
-)
+from retarget.hands.base import ActuatorSpec, ModelSource, SitePlacement, WristAlignment
+from retarget.hands.model import HandModel
+from retarget.hands.sources import example_robot_data_path, urdf_with_mujoco_compiler
 
 # panda.urdf: panda_finger_joint1 <limit effort="100" upper="0.04"/>
 FINGER_EFFORT = 100.0  # [N]

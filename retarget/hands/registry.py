@@ -1,8 +1,9 @@
 """The registry of robot hands behind ``--hand``.
 
 Built-in hands are discovered, not listed: every module of ``retarget.hands`` (other than
-``base``, ``registry`` and private modules) that defines ``HAND = HandModel(...)`` is registered
-on first use. Plugins register theirs with :func:`register`, or through the entry-point group
+``base``, ``build``, ``model``, ``registry``, ``sources`` and private modules) that defines
+``HAND = HandModel(...)`` is registered on first use. Plugins register theirs with
+:func:`register`, or through the entry-point group
 ``dexcanvas_retarget.hands`` (each entry point names a ``HandModel`` object).
 """
 
@@ -12,14 +13,18 @@ import importlib
 import logging
 import pkgutil
 import threading
+from importlib.metadata import entry_points
+from pathlib import Path
 
 from retarget.errors import RetargetError, UnknownHandError
-from retarget.hands.base import HandModel
+from retarget.hands.model import HandModel
 
 log = logging.getLogger(__name__)
 
 ENTRY_POINT_GROUP = "dexcanvas_retarget.hands"
-_SKIP = {"base", "registry"}
+_SKIP = {"base", "build", "model", "registry", "sources"}
+_PACKAGE = __name__.rpartition(".")[0]
+"""``retarget.hands``: found by its folder and name, so this module does not import it."""
 
 _hands: dict[str, HandModel] = {}
 _loaded = False
@@ -50,18 +55,14 @@ def _load_builtin() -> None:
     with _lock:
         if _loaded:
             return
-        import retarget.hands as pkg
-
-        for info in pkgutil.iter_modules(pkg.__path__):
+        for info in pkgutil.iter_modules([str(Path(__file__).parent)]):
             if info.name in _SKIP or info.name.startswith("_"):
                 continue
-            module = importlib.import_module(f"{pkg.__name__}.{info.name}")
+            module = importlib.import_module(f"{_PACKAGE}.{info.name}")
             hand = getattr(module, "HAND", None)
             if isinstance(hand, HandModel) and hand.name.lower() not in _hands:
                 register(hand)
         try:
-            from importlib.metadata import entry_points
-
             for ep in entry_points(group=ENTRY_POINT_GROUP):
                 try:
                     register(ep.load())

@@ -24,13 +24,13 @@ from __future__ import annotations
 
 from retarget.hands.base import (
     ActuatorSpec,
-    HandModel,
     ModelSource,
     SitePlacement,
     WristAlignment,
     WristOffset,
-    package_path,
 )
+from retarget.hands.model import HandModel
+from retarget.hands.sources import package_path
 
 _SRC = "gymnasium-robotics envs/assets/hand/shared.xml <actuator>"
 

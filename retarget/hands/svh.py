@@ -25,14 +25,14 @@ from __future__ import annotations
 
 from retarget.hands.base import (
     ActuatorSpec,
-    HandModel,
     JointCoupling,
     ModelSource,
     SitePlacement,
     WristAlignment,
     WristOffset,
-    package_path,
 )
+from retarget.hands.model import HandModel
+from retarget.hands.sources import package_path
 
 _P = "right_hand_"
 _XACRO = "SCHUNK schunk_svh_description/urdf/svh.urdf.xacro <mimic>"

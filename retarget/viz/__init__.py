@@ -3,10 +3,15 @@
 One module per concept:
 
 * ``data`` — what a picture shows per frame (:class:`~retarget.viz.data.SceneData`): a run
-  directory, its human demonstration, the recorded re-simulation, contacts;
+  directory, its human demonstration;
+* ``contacts`` — human and robot contact points per frame
+  (:class:`~retarget.viz.contacts.ContactFrames`);
+* ``resim`` — the run's re-simulation replayed and recorded;
 * ``view`` — layout and camera (:class:`~retarget.viz.view.SceneOptions`);
-* ``meshcat_scene`` — the meshcat scene, a server bound to 127.0.0.1, :func:`view_run`;
-* ``chromium`` / ``mujoco_render`` — the two still renderers;
+* ``meshcat_scene`` — the meshcat scene, :func:`view_run`; ``meshcat_connection``: its server,
+  bound to 127.0.0.1; ``meshcat_geoms``: drawing primitives, meshes and MuJoCo geoms;
+* ``chromium`` / ``mujoco_render`` — the two still renderers (``mujoco_child``: the MuJoCo
+  renderer's child process);
 * ``snapshot`` — ``retarget snapshot`` (:func:`run_snapshot`);
 * ``plots`` — force, object-error and contact-heatmap plots (matplotlib, Agg);
 * ``report`` — ``retarget report`` (:func:`run_report`).

@@ -1,6 +1,7 @@
 """The run as a meshcat scene: robot hand, object, translucent human hand, contacts and forces.
 
->>> from retarget.viz.meshcat_scene import MeshcatScene, meshcat_server, connect
+>>> from retarget.viz.meshcat_connection import connect, meshcat_server
+>>> from retarget.viz.meshcat_scene import MeshcatScene
 >>> with meshcat_server() as server:              # listens on 127.0.0.1 only
 ...     vis = connect(server)
 ...     scene = MeshcatScene(vis, data, hand)     # data: retarget.viz.data.SceneData
@@ -15,34 +16,39 @@ contacts}`` (the demonstration: MANO21 skeleton, the reference object, its conta
 ∝ force, ``style.FORCE_SCALE_M_PER_N``) and the colour of its finger; slots not in contact at a
 frame are hidden. ``layout='side_by_side'`` moves the human group aside instead of overlaying it.
 
-The server is meshcat's own bridge, started by :func:`meshcat_server` as a child process bound
-to 127.0.0.1 (``_meshcat_server``), checked after start (:func:`listening_addresses`) and
-ended with its process group when the ``with`` block ends, also on errors.
+The server and the connection: :mod:`retarget.viz.meshcat_connection`; drawing primitives,
+meshes and MuJoCo geoms: :mod:`retarget.viz.meshcat_geoms`.
 """
 
 from __future__ import annotations
 
 import contextlib
-import ipaddress
 import logging
 import math
-import os
-import select
-import subprocess
-import sys
-import tempfile
-import time
-import warnings
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
+import mujoco
 import numpy as np
 
+from dexcanvas_core.demos.geometry import object_geometry
+from retarget.hands import get_hand
 from retarget.viz import style
-from retarget.viz._process import managed_process
-from retarget.viz.data import ContactFrames, SceneData
+from retarget.viz.contacts import ContactFrames
+from retarget.viz.data import SceneData, load_human_for_run, load_run, scene_data
 from retarget.viz.errors import VizError
+from retarget.viz.meshcat_connection import connect, meshcat_server
+from retarget.viz.meshcat_geoms import (
+    aa_matrix,
+    drawn_geoms,
+    import_meshcat,
+    material,
+    pose,
+    quat_to_matrix,
+    set_mesh,
+    set_model_geom,
+    set_primitive,
+)
 from retarget.viz.view import Framing, SceneOptions, frame_scene, robot_body_positions
 
 log = logging.getLogger(__name__)
@@ -52,257 +58,6 @@ MAX_SLOTS_PER_GROUP = 24
 """Most contact points drawn per finger and frame (more are dropped, with a log message)."""
 SNAPSHOT_CSS = "<style>.dg { display: none !important; } body { margin: 0; }</style>"
 """Hides meshcat's control panel in snapshot pages."""
-
-_MJ_BOX, _MJ_SPHERE, _MJ_CAPSULE, _MJ_ELLIPSOID, _MJ_CYLINDER, _MJ_MESH = 6, 2, 3, 4, 5, 7
-_Y_TO_Z = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-"""Rotation taking meshcat's cylinder axis (+y) onto MuJoCo's (+z)."""
-
-
-# ---------------------------------------------------------------------------- server
-
-
-def _import_meshcat():
-    """``import meshcat`` without its DeprecationWarning (0.3.2 imports pyzmq's old ioloop)."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DeprecationWarning)
-        import meshcat
-    return meshcat
-
-
-@dataclass(frozen=True)
-class MeshcatServer:
-    """A running meshcat server (see :func:`meshcat_server`)."""
-
-    zmq_url: str
-    web_url: str
-    pid: int
-
-
-def listening_addresses(pid: int) -> list[tuple[str, int]]:
-    """``(ip, port)`` of every TCP socket process ``pid`` listens on (Linux ``/proc``)."""
-    inodes = set()
-    fd_dir = Path(f"/proc/{pid}/fd")
-    for fd in fd_dir.iterdir():
-        with contextlib.suppress(OSError):
-            target = os.readlink(fd)
-            if target.startswith("socket:["):
-                inodes.add(target[8:-1])
-    out = []
-    for table, v6 in (("tcp", False), ("tcp6", True)):
-        path = Path(f"/proc/{pid}/net/{table}")
-        if not path.exists():
-            continue
-        for line in path.read_text().splitlines()[1:]:
-            cols = line.split()
-            if len(cols) < 10 or cols[3] != "0A" or cols[9] not in inodes:  # 0A: LISTEN
-                continue
-            addr_hex, port_hex = cols[1].split(":")
-            raw = bytes.fromhex(addr_hex)
-            # /proc prints each 32-bit word of the address in host (little-endian) order.
-            words = b"".join(raw[i : i + 4][::-1] for i in range(0, len(raw), 4))
-            ip = ipaddress.IPv6Address(words) if v6 else ipaddress.IPv4Address(words)
-            out.append((str(ip), int(port_hex, 16)))
-    return out
-
-
-def _read_lines(proc: subprocess.Popen, n: int, deadline: float) -> list[str]:
-    """The first ``n`` lines the process prints (unbuffered reads, so select() stays exact)."""
-    fd = proc.stdout.fileno()
-    buf = b""
-    while buf.count(b"\n") < n:
-        remaining = deadline - time.monotonic()
-        if remaining <= 0:
-            raise VizError("the meshcat server did not start within its time limit")
-        ready, _, _ = select.select([fd], [], [], remaining)
-        if ready:
-            chunk = os.read(fd, 4096)
-            if not chunk:
-                raise VizError(f"the meshcat server exited at start (code {proc.wait()})")
-            buf += chunk
-    return [line.strip() for line in buf.decode().splitlines()[:n]]
-
-
-@contextlib.contextmanager
-def meshcat_server(timeout_s: float = 30.0) -> Iterator[MeshcatServer]:
-    """Start a meshcat server on 127.0.0.1; stop it (and its children) when the block ends.
-
-    Raises :class:`VizError` if it does not come up, or listens anywhere but on loopback.
-    """
-    with (
-        tempfile.TemporaryFile() as errlog,
-        managed_process(
-            [sys.executable, "-u", "-m", "retarget.viz._meshcat_server"],
-            stdout=subprocess.PIPE,
-            stderr=errlog,
-        ) as proc,
-    ):
-        deadline = time.monotonic() + timeout_s
-        try:
-            urls = dict(line.split("=", 1) for line in _read_lines(proc, 2, deadline))
-        except (VizError, ValueError) as e:
-            errlog.seek(0)
-            tail = errlog.read().decode(errors="replace").strip().splitlines()[-5:]
-            raise VizError(f"{e}: {' | '.join(tail)}") from None
-        addresses = listening_addresses(proc.pid) if Path("/proc/self/fd").is_dir() else []
-        public = [a for a in addresses if not ipaddress.ip_address(a[0]).is_loopback]
-        if public:
-            raise VizError(f"the meshcat server listens beyond this machine: {public}")
-        yield MeshcatServer(zmq_url=urls["zmq_url"], web_url=urls["web_url"], pid=proc.pid)
-
-
-def connect(server: MeshcatServer, timeout_s: float = 60.0):
-    """A ``meshcat.Visualizer`` talking to ``server`` (requests time out after ``timeout_s``)."""
-    import zmq
-
-    meshcat = _import_meshcat()
-    from meshcat.visualizer import ViewerWindow
-
-    class Window(ViewerWindow):
-        # meshcat's own window prints the URL and waits forever on a dead server.
-        def __init__(self, zmq_url: str, web_url: str):
-            self.server_proc = None
-            self.zmq_url = zmq_url
-            self.web_url = web_url
-            self.connect_zmq()
-
-        def connect_zmq(self):
-            self.zmq_socket = self.context.socket(zmq.REQ)
-            self.zmq_socket.setsockopt(zmq.LINGER, 0)
-            self.zmq_socket.setsockopt(zmq.RCVTIMEO, int(1000 * timeout_s))
-            self.zmq_socket.setsockopt(zmq.SNDTIMEO, int(1000 * timeout_s))
-            self.zmq_socket.connect(self.zmq_url)
-
-        def close(self):
-            self.zmq_socket.close(linger=0)
-
-    return meshcat.Visualizer(window=Window(server.zmq_url, server.web_url))
-
-
-# ---------------------------------------------------------------------------- geometry
-
-
-def _material(rgba):
-    _import_meshcat()
-    import meshcat.geometry as mg
-
-    kwargs = {"color": style.rgb_hex(rgba), "opacity": float(rgba[3])}
-    if rgba[3] < 1.0:
-        kwargs["depthWrite"] = False  # translucent layers do not hide what is behind them
-    return mg.MeshPhongMaterial(**kwargs)
-
-
-def _pose(R: np.ndarray | None = None, p=None, scale=None) -> np.ndarray:
-    T = np.eye(4)
-    if R is not None:
-        T[:3, :3] = R
-    if scale is not None:
-        T[:3, :3] = T[:3, :3] @ np.diag(scale)
-    if p is not None:
-        T[:3, 3] = p
-    return T
-
-
-def _quat_to_matrix(q_wxyz: np.ndarray) -> np.ndarray:
-    w, x, y, z = q_wxyz
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def _aa_to_matrix(aa: np.ndarray) -> np.ndarray:
-    from dexcanvas_core.rotations import aa_to_matrix
-
-    return np.asarray(aa_to_matrix(np.asarray(aa, dtype=np.float64)))
-
-
-def set_primitive(vis, kind: str, size, rgba, T_local: np.ndarray) -> bool:
-    """Draw one MuJoCo-style primitive (``box`` half-sizes, ``sphere``, ``capsule``/``cylinder``
-    radius and half-length along local z, ``ellipsoid`` radii) at ``vis``; False if unknown."""
-    _import_meshcat()
-    import meshcat.geometry as mg
-
-    mat = _material(rgba)
-    size = [float(s) for s in size]
-    if kind == "box":
-        vis.set_object(mg.Box([2 * size[0], 2 * size[1], 2 * size[2]]), mat)
-    elif kind == "sphere":
-        vis.set_object(mg.Sphere(size[0]), mat)
-    elif kind == "ellipsoid":
-        vis["e"].set_object(mg.Sphere(1.0), mat)
-        vis["e"].set_transform(_pose(scale=size[:3]))
-    elif kind in ("cylinder", "capsule"):
-        vis["c"].set_object(mg.Cylinder(2 * size[1], size[0]), mat)
-        vis["c"].set_transform(_pose(_Y_TO_Z))
-        if kind == "capsule":
-            for i, z in enumerate((-size[1], size[1])):
-                vis[f"s{i}"].set_object(mg.Sphere(size[0]), mat)
-                vis[f"s{i}"].set_transform(_pose(p=[0.0, 0.0, z]))
-    else:
-        return False
-    vis.set_transform(T_local)
-    return True
-
-
-def set_mesh(vis, vertices: np.ndarray, faces: np.ndarray, rgba) -> None:
-    """Draw a triangle mesh (``vertices (V, 3)`` [m], ``faces (F, 3)``) at ``vis``."""
-    _import_meshcat()
-    import meshcat.geometry as mg
-
-    vis.set_object(
-        mg.TriangularMeshGeometry(np.asarray(vertices, np.float32), np.asarray(faces, np.uint32)),
-        _material(rgba),
-    )
-
-
-_GEOM_KIND = {
-    _MJ_BOX: "box",
-    _MJ_SPHERE: "sphere",
-    _MJ_CAPSULE: "capsule",
-    _MJ_ELLIPSOID: "ellipsoid",
-    _MJ_CYLINDER: "cylinder",
-}
-
-
-def drawn_geoms(model, hand_geoms: list[int] | None = None) -> list[int]:
-    """Hand geoms to draw: the visual ones (no collisions) when the model has any, else all.
-    ``hand_geoms``: the hand's geoms (default: every geom not on the world body)."""
-    hand = hand_geoms
-    if hand is None:
-        hand = [g for g in range(model.ngeom) if model.geom_bodyid[g] > 0]
-    visual = [g for g in hand if not (model.geom_contype[g] or model.geom_conaffinity[g])]
-    return visual or hand
-
-
-def geom_rgba(model, g: int) -> tuple[float, float, float, float]:
-    mat = model.geom_matid[g]
-    rgba = model.mat_rgba[mat] if mat >= 0 else model.geom_rgba[g]
-    return tuple(float(c) for c in rgba)
-
-
-def set_model_geom(vis, model, g: int, rgba=None) -> bool:
-    """Draw geom ``g`` of a compiled ``MjModel`` at ``vis`` (pose relative to its body), in
-    ``rgba`` or the model's colour."""
-    _import_meshcat()
-    import meshcat.geometry as mg
-
-    T_local = _pose(_quat_to_matrix(model.geom_quat[g]), model.geom_pos[g])
-    rgba = geom_rgba(model, g) if rgba is None else rgba
-    t = int(model.geom_type[g])
-    if t == _MJ_MESH:
-        m = int(model.geom_dataid[g])
-        v0, nv = model.mesh_vertadr[m], model.mesh_vertnum[m]
-        f0, nf = model.mesh_faceadr[m], model.mesh_facenum[m]
-        verts = np.asarray(model.mesh_vert[v0 : v0 + nv], dtype=np.float32)
-        faces = np.asarray(model.mesh_face[f0 : f0 + nf], dtype=np.uint32)
-        vis.set_object(mg.TriangularMeshGeometry(verts, faces), _material(rgba))
-        vis.set_transform(T_local)
-        return True
-    kind = _GEOM_KIND.get(t)
-    return kind is not None and set_primitive(vis, kind, model.geom_size[g], rgba, T_local)
 
 
 # ---------------------------------------------------------------------------- the scene
@@ -317,8 +72,6 @@ class MeshcatScene:
     """
 
     def __init__(self, vis, data: SceneData, hand, options: SceneOptions | None = None):
-        import mujoco
-
         self.vis = vis
         self.data = data
         self.options = (options or SceneOptions()).validate()
@@ -334,7 +87,7 @@ class MeshcatScene:
         )
         self.root = vis[ROOT]
         # Everything of the demonstration (hand, its object, its contacts) is under "human".
-        self.root["human"].set_transform(_pose(p=self.framing.human_offset))
+        self.root["human"].set_transform(pose(p=self.framing.human_offset))
         self._setup_view()
         self._build_robot()
         self._build_object()
@@ -362,13 +115,13 @@ class MeshcatScene:
                 "box",
                 table.half_size,
                 style.TABLE_RGBA,
-                _pose(_quat_to_matrix(np.asarray(table.quat_wxyz)), table.box_center),
+                pose(quat_to_matrix(np.asarray(table.quat_wxyz)), table.box_center),
             )
 
     def _set_camera(self, cam: style.CameraView) -> None:
         # Content is shifted so the camera's target is the origin: meshcat's orbit controls
         # turn about the origin of the camera's parent frame.
-        self.root.set_transform(_pose(p=-np.asarray(cam.lookat)))
+        self.root.set_transform(pose(p=-np.asarray(cam.lookat)))
         off = cam.eye - np.asarray(cam.lookat)
         camera = self.vis["/Cameras/default/rotated/<object>"]
         # The camera's parent frame is rotated +90° about x (meshcat's y-up camera).
@@ -388,8 +141,6 @@ class MeshcatScene:
         return self.root["robot"][self.model.body(b).name or f"body{b}"]
 
     def _build_object(self) -> None:
-        from dexcanvas_core.demos.geometry import object_geometry
-
         geom = object_geometry(self.data.object_id)
         targets = [(self.root["object"], style.OBJECT_RGBA)]
         self._show_ref = self.options.layout == "side_by_side" or (
@@ -405,21 +156,21 @@ class MeshcatScene:
                 set_mesh(vis["mesh"], *geom.visual, rgba)
                 continue
             for i, prim in enumerate(geom.primitives):
-                T = _pose(_aa_to_matrix(prim.rot_aa), prim.pos)
+                T = pose(aa_matrix(prim.rot_aa), prim.pos)
                 set_primitive(vis[f"p{i}"], prim.type, prim.size, rgba, T)
 
     def _build_human(self) -> None:
-        _import_meshcat()
+        import_meshcat()
         import meshcat.geometry as mg
 
         human = self.root["human"]
-        mat = _material(style.HUMAN_RGBA)
+        mat = material(style.HUMAN_RGBA)
         for j in range(21):
             human["joints"][f"j{j}"].set_object(mg.Sphere(style.HUMAN_JOINT_RADIUS), mat)
         for k, _ in enumerate(style.human_bones()):
             body = human["bones"][f"b{k}"]["body"]
             body.set_object(mg.Cylinder(1.0, style.HUMAN_BONE_RADIUS), mat)
-            body.set_transform(_pose(p=[0.0, 0.5, 0.0]))  # unit cylinder from 0 to 1 along y
+            body.set_transform(pose(p=[0.0, 0.5, 0.0]))  # unit cylinder from 0 to 1 along y
 
     def _contact_sets(self) -> list[tuple[str, ContactFrames]]:
         out = []
@@ -436,7 +187,7 @@ class MeshcatScene:
         return node
 
     def _build_slots(self, name: str, contacts: ContactFrames) -> None:
-        _import_meshcat()
+        import_meshcat()
         import meshcat.geometry as mg
 
         counts = np.minimum(contacts.max_per_group(), MAX_SLOTS_PER_GROUP)
@@ -447,29 +198,27 @@ class MeshcatScene:
             rgba = style.group_color(g)
             if human:
                 rgba = (*rgba[:3], 0.6)
-            mat = _material(rgba)
+            mat = material(rgba)
             r = style.ARROW_RADIUS * (0.7 if human else 1.0)
             for k in range(int(n)):
                 s = root[f"g{g}_{k}"]
                 s["point"].set_object(mg.Sphere(style.CONTACT_POINT_RADIUS), mat)
                 s["shaft"]["body"].set_object(mg.Cylinder(1.0, r), mat)
-                s["shaft"]["body"].set_transform(_pose(p=[0.0, 0.5, 0.0]))
+                s["shaft"]["body"].set_transform(pose(p=[0.0, 0.5, 0.0]))
                 cone = mg.Cylinder(
                     style.ARROW_HEAD_LENGTH, radiusTop=0.0, radiusBottom=style.ARROW_HEAD_RADIUS
                 )
                 s["head"]["body"].set_object(cone, mat)
-                s["head"]["body"].set_transform(_pose(p=[0.0, style.ARROW_HEAD_LENGTH / 2, 0.0]))
+                s["head"]["body"].set_transform(pose(p=[0.0, style.ARROW_HEAD_LENGTH / 2, 0.0]))
                 slots.append((g, k))
         self._slots[name] = slots
 
     # -- posing ---------------------------------------------------------------------------
     def _robot_poses(self, t: int) -> list[tuple[int, np.ndarray]]:
-        import mujoco
-
         d = self._mjdata
         d.qpos[:] = self.data.robot_qpos[t]
         mujoco.mj_kinematics(self.model, d)
-        return [(b, _pose(_quat_to_matrix(d.xquat[b]), d.xpos[b])) for b in self._robot_bodies]
+        return [(b, pose(quat_to_matrix(d.xquat[b]), d.xpos[b])) for b in self._robot_bodies]
 
     def _frame_poses(self, t: int):
         """Every posed node at frame ``t``: ``(node, R, p, scale or None, visible or None)``."""
@@ -480,7 +229,7 @@ class MeshcatScene:
         out.append(
             (
                 self.root["object"],
-                _aa_to_matrix(data.object_rot_aa[t]),
+                aa_matrix(data.object_rot_aa[t]),
                 data.object_pos[t],
                 None,
                 None,
@@ -490,7 +239,7 @@ class MeshcatScene:
             out.append(
                 (
                     self.root["human"]["object_ref"],
-                    _aa_to_matrix(data.ref_object_rot_aa[t]),
+                    aa_matrix(data.ref_object_rot_aa[t]),
                     data.ref_object_pos[t],
                     None,
                     None,
@@ -552,7 +301,7 @@ class MeshcatScene:
         (t,) = self.data.check_frames([t])
         self._set_camera(self.framing.at(int(t)) if follow else self.framing.whole)
         for node, R, p, scale, visible in self._frame_poses(int(t)):
-            node.set_transform(_pose(R, p, scale))
+            node.set_transform(pose(R, p, scale))
             if visible is not None:
                 node.set_property("visible", bool(visible))
 
@@ -563,7 +312,7 @@ class MeshcatScene:
         ``max_fps``) and the clip runs at ``fps / stride``, so its duration is the
         demonstration's. Returns ``{"stride", "fps", "frames"}``.
         """
-        _import_meshcat()
+        import_meshcat()
         from meshcat.animation import Animation
 
         if max_fps <= 0:
@@ -578,7 +327,7 @@ class MeshcatScene:
                     target = frame
                     for part in node.path.entries[1:]:  # drop the visualizer's root
                         target = target[part]
-                    target.set_transform(_pose(R, p))
+                    target.set_transform(pose(R, p))
                     if scale is not None:
                         target.set_property("scale", "vector3", [float(s) for s in scale])
                     if visible is not None:
@@ -591,7 +340,7 @@ class MeshcatScene:
     def frame_html(self, t: int) -> str:
         """A self-contained page of frame ``t`` without meshcat's control panel."""
         if self._animated:  # a still page must not play the animation
-            _import_meshcat()
+            import_meshcat()
             from meshcat.animation import Animation
 
             self.vis.set_animation(Animation(), play=False)
@@ -619,9 +368,6 @@ def view_run(
     >>> with view_run("runs/shadow_cube2_tripod_0") as url:  # doctest: +SKIP
     ...     input(f"open {url} (Enter stops the server)")
     """
-    from retarget.hands import get_hand
-    from retarget.viz.data import load_human_for_run, load_run, scene_data
-
     run = load_run(run_dir)
     hand = get_hand(run.metrics["hand"])
     data = scene_data(run, load_human_for_run(run), hand=hand)

@@ -4,7 +4,7 @@ The picture matches the meshcat one: same colours, camera and layout. The parent
 a MuJoCo model of the scene (the hand's drawn geoms in the robot colour, the simulated and the
 reference object as mocap bodies, a table, a white sky), poses per frame, and the extra
 drawings MuJoCo has no bodies for (the human skeleton, contact points, force arrows) as lists of
-spheres and connectors; a child process (``python -m retarget.viz.mujoco_render JOB``) renders
+spheres and connectors; a child process (``python -m retarget.viz.mujoco_child JOB``) renders
 them with ``MUJOCO_GL`` set to ``egl`` (Debian ``libegl1 libegl-mesa0 libgl1-mesa-dri``) or
 ``osmesa`` (``libosmesa6``). The GL backend is chosen when ``mujoco`` is imported, so each try
 runs in a fresh process; a crash in a GL driver cannot take the caller down either.
@@ -14,11 +14,17 @@ from __future__ import annotations
 
 import logging
 import os
-import sys
 import tempfile
 from pathlib import Path
 
+import mujoco
 import numpy as np
+
+from dexcanvas_core.demos.geometry import object_geometry
+from dexcanvas_core.rotations import aa_to_quat_wxyz
+from retarget.viz import style
+from retarget.viz.meshcat_geoms import drawn_geoms
+from retarget.viz.mujoco_child import KIND_ARROW, KIND_CAPSULE
 
 BACKENDS: dict[str, str] = {
     "egl": "apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri",
@@ -28,23 +34,9 @@ BACKENDS: dict[str, str] = {
 
 log = logging.getLogger(__name__)
 
-_SPHERES = ("sphere_pos", "sphere_size", "sphere_rgba", "sphere_valid")
-_LINKS = ("link_from", "link_to", "link_width", "link_kind", "link_rgba", "link_valid")
-_KIND_CAPSULE, _KIND_ARROW = 0, 1
-
-
-# ---------------------------------------------------------------------------- parent side
-
 
 def build_model(hand, object_id: str, data, framing, options):
     """The scene as an ``MjModel``: drawn hand geoms, the two objects (mocap), table, sky."""
-    import mujoco
-
-    from dexcanvas_core.demos.geometry import object_geometry
-    from dexcanvas_core.rotations import aa_to_quat_wxyz
-    from retarget.viz import style
-    from retarget.viz.meshcat_scene import drawn_geoms
-
     spec = hand.build_spec()
     hand_nbody = hand.compile().nbody  # the hand's bodies come first; ours are added after
     for t in list(spec.textures):
@@ -129,8 +121,6 @@ def build_model(hand, object_id: str, data, framing, options):
 
 def _decorations(data, framing, options, frames: np.ndarray) -> dict[str, np.ndarray]:
     """Spheres and connectors (capsules, arrows) MuJoCo draws on top of the model, per frame."""
-    from retarget.viz import style
-
     spheres: list[list[tuple]] = []
     links: list[list[tuple]] = []
     off = framing.human_offset
@@ -147,7 +137,7 @@ def _decorations(data, framing, options, frames: np.ndarray) -> dict[str, np.nda
             for p in kp:
                 sph.append((p, style.HUMAN_JOINT_RADIUS, style.HUMAN_RGBA))
             for a, b in style.human_bones():
-                lnk.append((kp[a], kp[b], style.HUMAN_BONE_RADIUS, _KIND_CAPSULE, style.HUMAN_RGBA))
+                lnk.append((kp[a], kp[b], style.HUMAN_BONE_RADIUS, KIND_CAPSULE, style.HUMAN_RGBA))
         for contacts, shift, alpha, thin in sets:
             pos, force, group = contacts.at(t)
             for p, f, g in zip(pos + shift, force, group, strict=True):
@@ -157,7 +147,7 @@ def _decorations(data, framing, options, frames: np.ndarray) -> dict[str, np.nda
                 if n > 1e-3:
                     length = max(float(style.arrow_length(f)), style.ARROW_HEAD_LENGTH)
                     tail = p - length * f / n  # the arrow ends at the contact point
-                    lnk.append((tail, p, style.ARROW_RADIUS * thin, _KIND_ARROW, rgba))
+                    lnk.append((tail, p, style.ARROW_RADIUS * thin, KIND_ARROW, rgba))
         spheres.append(sph)
         links.append(lnk)
     K = len(frames)
@@ -188,10 +178,6 @@ def _decorations(data, framing, options, frames: np.ndarray) -> dict[str, np.nda
 
 def write_job(path: Path, hand, data, framing, options, frames, outputs: list[Path]) -> None:
     """Everything the child needs to render ``frames`` into ``outputs`` (one ``.npz``)."""
-    import mujoco
-
-    from dexcanvas_core.rotations import aa_to_quat_wxyz
-
     model = build_model(hand, data.object_id, data, framing, options)
     mjb = np.frombuffer(_model_bytes(model, mujoco), dtype=np.uint8)
     frames = np.asarray(frames, dtype=np.int64)
@@ -233,77 +219,3 @@ def _model_bytes(model, mujoco) -> bytes:
         path = os.path.join(d, "scene.mjb")
         mujoco.mj_saveModel(model, path, None)
         return Path(path).read_bytes()
-
-
-# ---------------------------------------------------------------------------- child side
-
-
-def render_job(job_path: str) -> None:
-    """Render every frame of a job file to its PNG (runs in the child process)."""
-    import mujoco
-    from PIL import Image
-
-    job = np.load(job_path)
-    with tempfile.TemporaryDirectory() as d:
-        mjb = os.path.join(d, "scene.mjb")
-        Path(mjb).write_bytes(job["model_mjb"].tobytes())
-        model = mujoco.MjModel.from_binary_path(mjb)
-    data = mujoco.MjData(model)
-    width, height = (int(v) for v in job["size"])
-    renderer = mujoco.Renderer(model, height=height, width=width)
-    try:
-        cam = mujoco.MjvCamera()
-        cam.type = mujoco.mjtCamera.mjCAMERA_FREE
-        opt = mujoco.MjvOption()
-        opt.sitegroup[:] = 0
-        for k, out in enumerate(job["outputs"]):
-            data.qpos[:] = job["qpos"][k]
-            data.mocap_pos[:] = job["mocap_pos"][k]
-            data.mocap_quat[:] = job["mocap_quat"][k]
-            mujoco.mj_kinematics(model, data)
-            c = job["cams"][k]
-            cam.lookat[:] = c[:3]
-            cam.distance, cam.azimuth, cam.elevation = float(c[3]), float(c[4]), float(c[5])
-            renderer.update_scene(data, camera=cam, scene_option=opt)
-            _add_decorations(renderer.scene, job, k, mujoco)
-            Image.fromarray(renderer.render()).save(str(out))
-    finally:
-        renderer.close()
-
-
-def _add_decorations(scene, job, k: int, mujoco) -> None:
-    eye = np.eye(3).reshape(-1)
-
-    def new_geom():
-        if scene.ngeom >= scene.maxgeom:
-            return None
-        g = scene.geoms[scene.ngeom]
-        scene.ngeom += 1
-        return g
-
-    for p, r, rgba, ok in zip(*(job[n][k] for n in _SPHERES), strict=True):
-        g = new_geom() if ok else None
-        if g is not None:
-            mujoco.mjv_initGeom(
-                g,
-                mujoco.mjtGeom.mjGEOM_SPHERE,
-                np.array([r, r, r]),
-                p,
-                eye,
-                rgba.astype(np.float32),
-            )
-    for a, b, w, kind, rgba, ok in zip(*(job[n][k] for n in _LINKS), strict=True):
-        g = new_geom() if ok else None
-        if g is None:
-            continue
-        t = mujoco.mjtGeom.mjGEOM_ARROW if kind == _KIND_ARROW else mujoco.mjtGeom.mjGEOM_CAPSULE
-        mujoco.mjv_initGeom(g, t, np.zeros(3), np.zeros(3), eye, rgba.astype(np.float32))
-        mujoco.mjv_connector(g, t, float(w), a, b)
-
-
-if __name__ == "__main__":
-    try:
-        render_job(sys.argv[1])
-    except Exception as e:  # report one line to the parent, which tries the next backend
-        print(f"{type(e).__name__}: {e}", file=sys.stderr)
-        sys.exit(1)

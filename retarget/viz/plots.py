@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from dexcanvas_core.keypoints import FINGERS
+from dexcanvas_core.taxonomy.manipulation import MANIPULATION_TYPES
 from dexcanvas_core.trajectory import CONTACT_PARTS, FORCE_GROUPS
 from retarget.viz import style
 from retarget.viz.errors import VizError
@@ -308,8 +309,6 @@ def heatmap_rows(
     types (taxonomy order), the mean human and robot frequency tables ``(types, 16)`` (NaN where
     no run of that type has the data) and the number of runs per type.
     """
-    from dexcanvas_core.taxonomy.manipulation import MANIPULATION_TYPES
-
     taxonomy = list(MANIPULATION_TYPES)
 
     def order(name: str):  # taxonomy order; unknown names last, alphabetically

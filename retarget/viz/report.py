@@ -12,6 +12,7 @@ from __future__ import annotations
 import base64
 import datetime as _dt
 import html
+import json
 import logging
 import os
 from dataclasses import dataclass, field
@@ -20,9 +21,18 @@ from typing import Literal
 
 import numpy as np
 
+from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.errors import DexCanvasError
+from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S
+from retarget.force_scores import REACH_M
+from retarget.hands import get_hand
+from retarget.validate import servo_summary
 from retarget.viz import plots
+from retarget.viz.contacts import human_contacts
+from retarget.viz.data import load_human_for_run, load_run, scene_data
 from retarget.viz.errors import RendererUnavailableError, VizError, require
+from retarget.viz.resim import record_resimulation
+from retarget.viz.snapshot import MANIFEST, SnapshotConfig, check_renderer, choose_frames, draw
 
 log = logging.getLogger(__name__)
 
@@ -33,7 +43,6 @@ PLOTS_DIR = "plots"
 @dataclass(frozen=True)
 class ReportConfig:
     """One ``retarget report``."""
-
     run_dirs: tuple[Path, ...]
     """Run directories (``retarget run``); one or more."""
     out: Path | None = None
@@ -63,7 +72,6 @@ class ReportConfig:
 @dataclass
 class RunSection:
     """What the report shows of one run."""
-
     run_dir: Path
     metrics: dict
     notes: list[str] = field(default_factory=list)
@@ -75,16 +83,6 @@ class RunSection:
 
 
 def _section(run_dir: Path, cfg: ReportConfig) -> RunSection:
-    from dexcanvas_core.demos.geometry import object_geometry
-    from retarget.hands import get_hand
-    from retarget.viz.data import (
-        human_contacts,
-        load_human_for_run,
-        load_run,
-        record_resimulation,
-        scene_data,
-    )
-
     run = load_run(run_dir)
     m = run.metrics
     sec = RunSection(run_dir=run.run_dir, metrics=m)
@@ -159,8 +157,6 @@ def _section(run_dir: Path, cfg: ReportConfig) -> RunSection:
     # -- stills
     manifest = _read_manifest(run.run_dir)
     if manifest is None and cfg.snapshots and human is not None:
-        from retarget.viz.snapshot import SnapshotConfig, check_renderer, choose_frames, draw
-
         scfg = SnapshotConfig(out=run.run_dir, run_dir=run.run_dir, renderer=cfg.renderer)
         try:
             renderer = check_renderer(cfg.renderer)
@@ -216,10 +212,6 @@ def force_notes(m: dict) -> dict[str, str]:
 
 
 def _read_manifest(run_dir: Path) -> dict | None:
-    import json
-
-    from retarget.viz.snapshot import MANIFEST
-
     path = run_dir / MANIFEST
     if not path.is_file():
         return None
@@ -320,8 +312,6 @@ def metrics_rows(m: dict) -> list[tuple[str, str]]:
             f"{html.escape(str(m.get('uuid')))} ({html.escape(str(m.get('dataset')))})",
         ),
     ]
-    from retarget.validate import servo_summary
-
     if (servo := servo_summary(m)) is not None:
         rows.append(("servo tracking error mean (simulation − command)", html.escape(servo, False)))
     forces = m.get("finger_force_mean_n") or {}
@@ -333,8 +323,6 @@ def metrics_rows(m: dict) -> list[tuple[str, str]]:
             )
         )
     if m.get("force_profile_correlation_mean") is not None:
-        from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S
-
         rows.append(
             (
                 "force matching: correlation with the human (whole clip / contact frames / "
@@ -346,8 +334,6 @@ def metrics_rows(m: dict) -> list[tuple[str, str]]:
             )
         )
     if "fingers_reached" in m:
-        from retarget.force_scores import REACH_M
-
         rows.append(
             (
                 "force matching: fingers whose plan reaches the human's contact "

@@ -3,7 +3,7 @@
 ``run_snapshot(SnapshotConfig(out=..., hand="shadow", pair="cube2/tripod", frames=(0, 60)))``
 retargets the pair (``retarget.run.run_retarget``, its outputs go into ``out``) or reads an
 existing run directory (``run_dir=``), re-simulates it to record the robot's contacts
-(:func:`retarget.viz.data.record_resimulation`) and writes into ``out``:
+(:func:`retarget.viz.resim.record_resimulation`) and writes into ``out``:
 
 * ``frame_<t>.png`` for every chosen frame — by default rendered by headless Chromium from a
   ``static_html()`` page of the meshcat scene at that frame, else (``renderer='mujoco'``, or
@@ -18,9 +18,11 @@ No server or browser outlives the call (``_process``), also on errors.
 from __future__ import annotations
 
 import contextlib
+import ctypes.util
 import json
 import logging
 import os
+import sys
 import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -28,17 +30,18 @@ from typing import Literal
 
 import numpy as np
 
+from dexcanvas_core.demos.geometry import object_geometry
+from retarget.hands import get_hand
+from retarget.loading import load_subject
+from retarget.pipeline import RunConfig, check_pair
+from retarget.run import run_retarget
 from retarget.viz import chromium, images, mujoco_render
 from retarget.viz._process import run_process
-from retarget.viz.data import (
-    RunFiles,
-    SceneData,
-    load_human_for_run,
-    load_run,
-    record_resimulation,
-    scene_data,
-)
+from retarget.viz.data import RunFiles, SceneData, load_human_for_run, load_run, scene_data
 from retarget.viz.errors import RendererUnavailableError, VizError, require
+from retarget.viz.meshcat_connection import connect, meshcat_server
+from retarget.viz.meshcat_scene import MeshcatScene
+from retarget.viz.resim import record_resimulation
 from retarget.viz.view import SceneOptions, frame_scene, robot_body_positions
 
 log = logging.getLogger(__name__)
@@ -53,7 +56,6 @@ MUJOCO_TIMEOUT_S = 300.0
 @dataclass(frozen=True)
 class SnapshotConfig:
     """One ``retarget snapshot``."""
-
     out: Path
     """Output directory (created). When retargeting, the run's own files go there too."""
     hand: str | None = None
@@ -158,8 +160,6 @@ def frame_png(t: int) -> str:
 def mujoco_available() -> dict[str, str | None]:
     """Backend → None if its library is present, else the package hint (a fast check; the
     render itself is the real test)."""
-    import ctypes.util
-
     libs = {"egl": ("EGL",), "osmesa": ("OSMesa",)}
     return {
         b: None if all(ctypes.util.find_library(lib) for lib in libs[b]) else hint
@@ -214,8 +214,6 @@ def render_mujoco(
 ) -> list[Path]:
     """Stills of ``frames`` through MuJoCo's offscreen renderer (``MUJOCO_GL`` backends tried
     in turn, each in a fresh child process)."""
-    import sys
-
     framing = frame_scene(data, options, robot_body_positions(hand.compile(), data.robot_qpos))
     pngs = [out_dir / frame_png(t) for t in frames]
     forced = os.environ.get("MUJOCO_GL", "").strip().lower()
@@ -230,7 +228,7 @@ def render_mujoco(
                 env.setdefault("PYOPENGL_PLATFORM", "egl")
             elif backend == "osmesa":
                 env["PYOPENGL_PLATFORM"] = "osmesa"
-            args = [sys.executable, "-m", "retarget.viz.mujoco_render", str(job)]
+            args = [sys.executable, "-m", "retarget.viz.mujoco_child", str(job)]
             try:
                 r = run_process(args, timeout_s=MUJOCO_TIMEOUT_S, env=env)
             except Exception as e:
@@ -256,10 +254,6 @@ def _prepare(cfg: SnapshotConfig) -> tuple[RunFiles, object, list[int]]:
         run = load_run(cfg.run_dir)
         human = load_human_for_run(run)
         return run, human, choose_frames(cfg, run.num_frames)
-    from retarget.hands import get_hand
-    from retarget.loading import load_subject
-    from retarget.pipeline import check_pair
-    from retarget.run import RunConfig, run_retarget
 
     hand = get_hand(cfg.hand)
     rcfg = RunConfig(
@@ -284,9 +278,6 @@ def _prepare(cfg: SnapshotConfig) -> tuple[RunFiles, object, list[int]]:
 def run_snapshot(cfg: SnapshotConfig) -> dict:
     """Write the stills, ``scene.html`` and ``snapshots.json`` (module docstring); return the
     manifest."""
-    from dexcanvas_core.demos.geometry import object_geometry
-    from retarget.hands import get_hand
-
     cfg = cfg.validate()
     require("meshcat", "PIL")
     renderer = check_renderer(cfg.renderer)  # fail before the long part
@@ -316,8 +307,6 @@ def draw(
     run_dir: Path | None = None,
 ) -> dict:
     """Render ``frames`` of ``data`` into ``out_dir`` (+ ``scene.html`` and the manifest)."""
-    from retarget.viz.meshcat_scene import MeshcatScene, connect, meshcat_server
-
     options = cfg.options()
     frames = [int(t) for t in data.check_frames(frames)]
     out_dir = Path(out_dir)
