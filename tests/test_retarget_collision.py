@@ -14,7 +14,7 @@ from retarget.hands import available_hands, get_hand
 from retarget.hands.base import wrist_qpos_from_mano
 from retarget.kinematics import MujocoKinematics, PinocchioKinematics
 from retarget.limits import CollisionLimit
-from retarget.limits.collision import ContactSweep
+from retarget.limits.sweep import ContactSweep
 from retarget.retargeter import RetargetConfig, Retargeter
 from retarget.state import RobotState
 
