@@ -381,8 +381,9 @@ def _hand_job(args) -> list[dict]:
     from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.sim.pipeline import GRAVITY
     from retarget.baselines import KinematicMetrics, measure_trajectory
+    from retarget.config import RetargetConfig
     from retarget.hands import get_hand
-    from retarget.retargeter import RetargetConfig, Retargeter
+    from retarget.retargeter import Retargeter
     from retarget.run import refined_force_metrics
     from retarget.validate import Resimulator, ValidateConfig
 
@@ -402,9 +403,11 @@ def _hand_job(args) -> list[dict]:
             r.update(mass_kg=geom.mass_kg, weight_n=weight_n)
         resim_soft = Resimulator(hand, geom)
         configs = {
-            "b": RetargetConfig(**{**overrides, "use_contacts": False, "squeeze_depth": 0.0}),
-            "c": RetargetConfig(**overrides),
-            "d": RetargetConfig(**{**overrides, "force_matching": True}),
+            "b": RetargetConfig.from_overrides(
+                {**overrides, "use_contacts": False, "squeeze_depth": 0.0}
+            ),
+            "c": RetargetConfig.from_overrides(overrides),
+            "d": RetargetConfig.from_overrides({**overrides, "force_matching": True}),
         }
         for v in ("b", "c", "d"):
             row = rows[v]
@@ -487,7 +490,7 @@ def _hand_job(args) -> list[dict]:
                     rf = calibrate_refined(
                         hand, geom, human, robot_d, retargeters["d"].tip_sites, rf, rcfg,
                         ForceCalibrationConfig(iterations=n_calibrate),
-                        retargeters["d"].cfg.force_scale,
+                        retargeters["d"].cfg.force_matching.scale,
                     )  # fmt: skip
                     cm = rf.calibration
                     row.update(
@@ -1862,8 +1865,8 @@ def main(argv: list[str] | None = None) -> int:
         "its forces against the first's: the force correlation's ceiling (mpc tracker only)",
     )
     a = ap.parse_args(argv)
+    from retarget.config import RetargetConfig
     from retarget.refine import RefineConfig
-    from retarget.retargeter import RetargetConfig
 
     overrides = config_overrides(a.overrides, RetargetConfig)
     refine_overrides = config_overrides(a.refine_overrides, RefineConfig, "--refine-set")

@@ -161,7 +161,8 @@ def run_one(
     the solves timed ``timing_repeats`` times, alternating (``_timing``)."""
     from dexcanvas_core.demos.geometry import object_geometry
     from retarget.baselines import KinematicMetrics, measure_trajectory
-    from retarget.retargeter import RetargetConfig, Retargeter
+    from retarget.config import RetargetConfig
+    from retarget.retargeter import Retargeter
     from retarget.validate import Resimulator
 
     geom = object_geometry(pair.object.id)
@@ -172,7 +173,9 @@ def run_one(
         "frames": traj.num_frames,
         "uuid": traj.uuid,
     }
-    rt = Retargeter(hand, geom, RetargetConfig(**{"backend": "pinocchio", **(overrides or {})}))
+    rt = Retargeter(
+        hand, geom, RetargetConfig.from_overrides({"backend": "pinocchio", **(overrides or {})})
+    )
     solve = _timed_solves(rt)
     robot = rt.retarget(traj)
     ours_km = KinematicMetrics.of(robot).summary()
@@ -523,7 +526,7 @@ def main(argv: list[str] | None = None) -> int:
         "(the minimum beside it)",
     )
     a = ap.parse_args(argv)
-    from retarget.retargeter import RetargetConfig
+    from retarget.config import RetargetConfig
 
     overrides = config_overrides(a.set, RetargetConfig)
     hands = tuple(a.hands) if a.hands else None

@@ -20,7 +20,7 @@ demonstrations are generated ones by another operator and seed than the benchmar
 (``operator2``, seed 1) of pairs past the benchmarks' suites (from the 41st pair of their
 order), so the benchmarks judge the offset on motions and pairs it was not measured on. The
 result goes in the hand module as ``HandModel.wrist_offset``; with
-``RetargetConfig.use_wrist_offset`` on, ``Retargeter.human_targets`` aims the wrist at the
+``RetargetConfig.wrist.use_offset`` on, ``Retargeter.human_targets`` aims the wrist at the
 human wrist pose composed with it.
 
 Measured with ``benchmarks/retarget_speed_quality.py --hands shadow allegro leap inspire
@@ -157,7 +157,7 @@ def calibration_demos(
 
 def wrist_in_target_frame(retargeter, traj, Q: np.ndarray, targets: dict | None = None):
     """Per frame, the robot wrist site's pose in the frame of ``retargeter``'s wrist targets
-    (the human wrist pose when ``use_wrist_offset`` is off or the hand has no offset):
+    (the human wrist pose when ``wrist.use_offset`` is off or the hand has no offset):
     ``(rotations (T, 3, 3), positions (T, 3) [m])``."""
     from retarget.hands.base import WRIST_SITE
 
@@ -210,12 +210,14 @@ def calibrate_wrist(
     from scipy.spatial.transform import Rotation
 
     from dexcanvas_core.demos.geometry import object_geometry
-    from retarget.retargeter import RetargetConfig, Retargeter
+    from retarget.config import RetargetConfig
+    from retarget.retargeter import Retargeter
 
-    cfg = RetargetConfig(
-        w_wrist_pos=0.0, w_wrist_rot=0.0, w_posture=0.0, w_smooth=0.0, use_contacts=False,
-        use_collision=False, use_self_collision=False, use_wrist_offset=False,
-    )  # fmt: skip
+    cfg = RetargetConfig.from_overrides({
+        "wrist.position_weight": 0.0, "wrist.rotation_weight": 0.0, "wrist.use_offset": False,
+        "posture.weight": 0.0, "smoothness.weight": 0.0, "contacts.enabled": False,
+        "collision.enabled": False, "self_collision.enabled": False,
+    })  # fmt: skip
     probe = Retargeter(hand, None, cfg)
     locked = proximal_joints(probe)
     if locked:  # held at their default posture (a narrow range: the QP keeps its bounds)

@@ -306,7 +306,7 @@ def calibrate_forces(
     ``sim``: the input commands' re-simulation, when already run (it is iterate 0).
     Returns the chosen iterate and every iterate's success and force error."""
     cfg = (cfg or ForceCalibrationConfig()).validate()
-    target = human_target(robot, retargeter.cfg.force_scale)
+    target = human_target(robot, retargeter.cfg.force_matching.scale)
     m, nq = resimulator.model, resimulator.hand_nq
     if robot.q.shape[1] != nq:
         raise RetargetError(

@@ -593,9 +593,12 @@ class DexRetargetingBaseline:
         ``geometry`` (the object's ``ObjectGeometry``) sets the scaling centre (the object's,
         as ours); without it keypoints scale about the wrist.
         """
-        from retarget.retargeter import RetargetConfig, Retargeter
+        from retarget.config import RetargetConfig
+        from retarget.retargeter import Retargeter
 
-        rt = Retargeter(self.hand, geometry, RetargetConfig(use_collision=False))
+        rt = Retargeter(
+            self.hand, geometry, RetargetConfig.from_overrides({"collision.enabled": False})
+        )
         if rt.kp_sites != self.keypoint_sites:
             raise RetargetError("keypoint_sites differ from the retargeter's; pass them explicitly")
         tg = rt.human_targets(traj)

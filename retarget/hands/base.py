@@ -229,7 +229,7 @@ class WristOffset:
     (finger direction, thumb side, mount point), which fixes the frames but not the pose a grasp
     needs: a hand whose fingers curl differently from a human's (one motor per finger on Inspire
     and Ability) reaches the human's fingertips only with its wrist flexed and moved. The
-    retargeter (``RetargetConfig.use_wrist_offset``) aims the wrist at the human wrist pose
+    retargeter (``RetargetConfig.wrist.use_offset``) aims the wrist at the human wrist pose
     composed with this offset
     (``R* = R_h exp(rotvec)``, ``p* = p_h + R_h translation``). Measured, not designed:
     ``retarget calibrate-wrist --hand NAME`` (:mod:`retarget.calibration`) prints it.
@@ -319,11 +319,11 @@ class HandModel:
     """The wrist target's offset from the human wrist (:class:`WristOffset`); None: none."""
     joint_limit_margin: float = 0.0
     """How far [rad or m] the retargeting's kinematic solution keeps this hand's finger joints
-    inside their ranges unless ``RetargetConfig.joint_limit_margin`` says otherwise (for a hand
+    inside their ranges unless ``RetargetConfig.joint_limits.margin`` says otherwise (for a hand
     whose fingers press badly from a limit; see there)."""
     wrist_weight: float = 1.0
-    """Factor on the retargeting's wrist-pose weights (``RetargetConfig.w_wrist_pos`` and
-    ``w_wrist_rot``) for this hand; 0: the wrist is placed by the fingertips, the contacts and
+    """Factor on the retargeting's wrist-pose weights (``RetargetConfig.wrist``'s weights) for
+    this hand; 0: the wrist is placed by the fingertips, the contacts and
     the smoothness term alone. For a hand whose wrist the human wrist pose places badly even
     with its calibrated offset (the Panda gripper has none: no one offset describes it;
     ``retarget calibrate-wrist``)."""
