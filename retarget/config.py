@@ -25,6 +25,25 @@ from retarget.objectives.regularization import PostureConfig, SmoothnessConfig
 from retarget.objectives.wrist import WristConfig
 from retarget.solve import SolverConfig
 
+__all__ = [
+    "FLAT_NAMES",
+    "ClosingConfig",
+    "CollisionConfig",
+    "ContactsConfig",
+    "ForceMatchingConfig",
+    "GripConfig",
+    "JointLimitsConfig",
+    "KeypointsConfig",
+    "PostureConfig",
+    "RetargetConfig",
+    "SelfCollisionConfig",
+    "SmoothnessConfig",
+    "SolverConfig",
+    "VectorsConfig",
+    "VelocityConfig",
+    "WristConfig",
+    "resolve_name",
+]
 
 @dataclass(frozen=True)
 class RetargetConfig:

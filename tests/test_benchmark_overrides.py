@@ -55,7 +55,7 @@ def test_retarget_benchmark_set_checks_names_and_values_before_any_run():
     import retarget_speed_quality as bench
     from _common import config_overrides
 
-    from retarget.retargeter import RetargetConfig
+    from retarget.config import RetargetConfig
 
     pairs = [parse_override("w_posture=1e-5"), parse_override("use_self_collision=False")]
     assert config_overrides(pairs, RetargetConfig) == {
@@ -65,7 +65,7 @@ def test_retarget_benchmark_set_checks_names_and_values_before_any_run():
     for argv, message in (
         (["--set", "w_postur=0"], "unknown RetargetConfig field"),
         (["--set", "w_posture=-1"], "must be finite and >= 0"),
-        (["--set", "grip='squeeze'"], "unknown grip"),
+        (["--set", "grip='squeeze'"], "GripConfig.mode: unknown value 'squeeze'"),
     ):
         with pytest.raises(SystemExit, match=message):
             bench.main([*argv, "--out", "/nonexistent/never-written.json"])
