@@ -422,7 +422,7 @@ def test_cli_run_writes_outputs(small_dataset, tmp_path, capsys):
         ),
         (
             ["--hand", "shadow", "--pair", "cube2/tripod", "--set", "w_contacts=-1"],
-            "weight w_contacts must be finite and >= 0",
+            "ContactsConfig.weight must be finite and >= 0",
         ),
         (
             ["--hand", "shadow", "--pair", "cube2/tripod", "--set", "iterations=0"],
@@ -736,7 +736,7 @@ def test_joint_limit_margin_keeps_finger_joints_inside_their_ranges():
 
 
 def test_joint_limit_margin_defaults_to_the_hands_own():
-    """``RetargetConfig.joint_limit_margin=None`` (the default) takes the hand's
+    """``RetargetConfig.joint_limits.margin=None`` (the default) takes the hand's
     ``HandModel.joint_limit_margin`` (Allegro 0.05 rad, the others 0); a number overrides it;
     the mink backend's configuration limit gets the same ranges."""
     geom = object_geometry("cube2")
