@@ -45,6 +45,7 @@ __all__ = [
     "resolve_name",
 ]
 
+
 @dataclass(frozen=True)
 class RetargetConfig:
     """Weights and switches of the per-frame QP, one config per term (each validated when

@@ -1,6 +1,6 @@
 """The position command's grip (``q_command = q + Δq``): the weight-aware grip
-(``grip="wrench"``), the depth squeeze (``grip="depth"``) and force matching's squeeze, each
-turned into joint offsets through the servo gains."""
+(``grip.mode="wrench"``), the depth squeeze (``grip.mode="depth"``) and force matching's
+squeeze, each turned into joint offsets through the servo gains."""
 
 from __future__ import annotations
 
@@ -72,7 +72,7 @@ class GripAssembly:
         the centre of mass, with ``a`` the object's captured acceleration (50 ms smoothing) and
         ``λ`` the share of the weight the hand carries (the force pipeline's
         ``sim.grip.carried_load``: 0 while the object rests on the table, 1 off it, built up
-        over the ``grip_lead_s`` before lift-off: the grip must be there when the table stops
+        over the ``grip.lead_s`` before lift-off: the grip must be there when the table stops
         helping)."""
         T, F = traj.num_frames, len(self.tip_sites)
         kp, tau_max = self._servo_gains()
@@ -146,7 +146,8 @@ class GripAssembly:
             if not W.any():
                 active = opp
         # A finger the captured hand touches with while the human's presses nothing is backed
-        # off the surface (``idle_contact_clearance``) instead of pressed by the servo.
+        # off the surface (``force_matching.idle_contact_clearance``) instead of pressed by
+        # the servo.
         idle = np.zeros_like(active)
         if fm["mode"] == "human" and self.cfg.force_matching.idle_contact_clearance is not None:
             idle = tg["contact_active"][t] & ~active
@@ -167,7 +168,7 @@ class GripAssembly:
         Jall = Jall @ C
         dq = np.zeros(self.nq)
         # The robot link presses where it touches, along the object's normal there
-        # (``grip_surface_normals``), which is not the human's where the robot's link meets
+        # (``grip.surface_normals``), which is not the human's where the robot's link meets
         # the object elsewhere (a larger hand's fingertip on an apple's upper side, the
         # human's on its equator). Force matching keeps the human's normals: its forces are
         # the human's own vectors, their cones the human's.
@@ -210,7 +211,7 @@ class GripAssembly:
         # A finger point inside the object (the solution's penetration margin) has no such
         # gradient to trust near an edge (the nearest face from inside may not be the one it
         # went through): it keeps the human contact's normal (a pressed one: the normal where
-        # it touches with ``grip_surface_normals``).
+        # it touches with ``grip.surface_normals``).
         step_normals = normals[idx].copy()
         if (~pressed).any() and self.geometry is not None:
             R_o, p_o = fm["R_obj"][t], fm["p_obj"][t]
@@ -259,7 +260,7 @@ class GripAssembly:
         return C
 
     def _squeeze(self, q: np.ndarray, active: np.ndarray, normals: np.ndarray) -> np.ndarray:
-        """``grip="depth"``: joint offset pressing each contacting finger ``squeeze_depth``
+        """``grip.mode="depth"``: joint offset pressing each contacting finger ``squeeze_depth``
         into the surface.
 
         ``Δq = C (J C)ᵀ (J C (J C)ᵀ + λ I)⁻¹ δ`` with ``δ = −depth · n`` per active contact,

@@ -12,8 +12,8 @@ enlarged around the object, so its fingertips land just outside the surface and 
 terms below close them onto it, instead of the wrist pinning a larger hand into the object;
 * fingertip-to-fingertip vectors from the thumb (scaled), which keep pinches closed;
 * contacts: where the human fingertip touches the object (a fingertip within
-  ``contact_threshold`` of the object surface, or a phalanx, by default; the force pipeline's
-  contact records with ``contacts_from="records"``), the robot fingertip site goes to the same
+  ``contacts.threshold_m`` of the object surface, or a phalanx, by default; the force pipeline's
+  contact records with ``contacts.source="records"``), the robot fingertip site goes to the same
   surface point (unscaled, in the object's frame);
 
 and the limits are the joint ranges, velocity bounds, the model's couplings, non-penetration
@@ -71,14 +71,18 @@ log = logging.getLogger(__name__)
 class Retargeter(HumanTargets, GripAssembly, FrameSolver):
     """Retarget human trajectories onto one robot hand (and optionally one object).
 
+    The per-frame targets are :class:`retarget.targets.HumanTargets`', the per-frame solve
+    :class:`retarget.solve.FrameSolver`'s, the position command's grip and force matching
+    :class:`retarget.grip.GripAssembly`'s; the configuration is :mod:`retarget.config`.
+
     Args:
         hand: a ``retarget.hands.HandModel`` (see ``retarget.hands.get_hand``).
         geometry: the object's ``ObjectGeometry`` (``dexcanvas_core.demos.object_geometry``);
             ``None`` retargets the hand alone (keypoint-only use).
-        config: weights and switches.
+        config: weights and switches (default ``RetargetConfig()``).
         table: the table of the trajectories it will retarget (``table_of(trajectory)``;
-            default the default table): the hand keeps ``table_clearance`` above its top, and
-            only there. :meth:`retarget` refuses a trajectory on another table.
+            default the default table): the hand keeps ``collision.table_clearance`` above its
+            top, and only there. :meth:`retarget` refuses a trajectory on another table.
     """
 
     def __init__(

@@ -40,7 +40,8 @@ class RobotTrajectory:
     solve_time_s: float
     robot_force: np.ndarray | None = None
     """(T, F, 3) [N] the commanded contact force per robot finger (on the object): force
-    matching's, or the weight-aware grip's (``grip="wrench"``); ``None`` with ``grip="depth"``."""
+    matching's, or the weight-aware grip's (``grip.mode="wrench"``); ``None`` with
+    ``grip.mode="depth"``."""
     human_force: np.ndarray | None = None
     """(T, F, 3) [N] the human force of the finger each robot finger stands for (force
     matching only)."""

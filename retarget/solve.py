@@ -158,7 +158,7 @@ class FrameSolver:
         deeper in the object than the margins falls back to the last solution (more than one
         step may be needed to undo it: the example cube2/tripod, Shadow, 17 mm deep). The
         prediction is clipped to the solver's joint ranges (inside the servos' by
-        ``joint_limit_margin``)."""
+        ``joint_limits.margin``)."""
         q0 = predicted_start(Q_last, wq, active, t, self._solve_lower, self._solve_upper)
         return Q_last[1] if self._too_deep(q0) or self._breaks_couplings(q0) else q0
 

@@ -144,17 +144,17 @@ class HumanTargets:
     def _scaled_keypoints(self, traj: Trajectory, h_kp: np.ndarray) -> np.ndarray:
         """The human keypoints ``h_kp`` (T, 21, 3) [m, world] scaled to the robot hand's size.
 
-        Without an object: about the wrist by ``scale``. With one, ``keypoint_scaling``:
+        Without an object: about the wrist by ``scale``. With one, ``keypoints.scaling``:
 
         * ``uniform`` — about the object's centre by ``scale``;
         * ``surface`` — the same, then each keypoint moved along the surface normal until its
           distance to the surface is that of a robot-sized finger with the human's gap: with
           ``ρ = finger_radius_m`` and the human keypoint's distance ``d``, ``scale·d`` within
           ``ρ`` (touching), ``scale·ρ + (d − ρ)·g(d)`` beyond, the gap's scale ``g`` going
-          from 1 to ``scale`` over ``scale_blend_m`` (smoothstep; ``scale·d`` far away). Across
-          the surface the keypoints keep the robot hand's spread (its fingers are wider
-          apart); towards it, a keypoint that touches stays touching and one that keeps a gap
-          keeps it.
+          from 1 to ``scale`` over ``keypoints.scale_blend_m`` (smoothstep; ``scale·d`` far
+          away). Across the surface the keypoints keep the robot hand's spread (its fingers are
+          wider apart); towards it, a keypoint that touches stays touching and one that keeps a
+          gap keeps it.
 
         Scaled uniformly, a fingertip on the object is pushed ``(scale − 1)·r`` off the surface
         (``r`` its distance from the centre: ~9 mm on a 5 cm cube for Shadow's 1.37), so the
@@ -198,9 +198,9 @@ class HumanTargets:
         return margins
 
     def _closing_parts(self, tg: dict, fps: float) -> np.ndarray | None:
-        """(T, F, 3) factors in [0, 1] on ``w_closing`` of the finger parts the human touches
+        """(T, F, 3) factors in [0, 1] on ``closing.weight`` of the finger parts the human touches
         the object with besides each finger's contact part (the closing terms' links): 0 where
-        not, rising from 0 to 1 over the ``closing_ramp_s`` after the part's touch began;
+        not, rising from 0 to 1 over the ``closing.ramp_s`` after the part's touch began;
         ``None`` without closing terms."""
         if self.contacts is None or not (self.cfg.contacts.enabled and self.cfg.closing.weight > 0):
             return None
