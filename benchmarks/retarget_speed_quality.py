@@ -86,9 +86,10 @@ from retarget.baselines import (
     KinematicMetrics,
     measure_trajectory,
 )
+from retarget.config import RetargetConfig
 from retarget.hands import available_hands, get_hand
 from retarget.pipeline import check_pair
-from retarget.retargeter import RetargetConfig, Retargeter
+from retarget.retargeter import Retargeter
 from retarget.validate import Resimulator
 
 NAME = "retarget_speed_quality"
@@ -191,7 +192,9 @@ def run_one(
         "frames": traj.num_frames,
         "uuid": traj.uuid,
     }
-    rt = Retargeter(hand, geom, RetargetConfig(**{"backend": "pinocchio", **(overrides or {})}))
+    rt = Retargeter(
+        hand, geom, RetargetConfig.from_overrides({"backend": "pinocchio", **(overrides or {})})
+    )
     solve = _timed_solves(rt)
     robot = rt.retarget(traj)
     ours_km = KinematicMetrics.of(robot).summary()

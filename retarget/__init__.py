@@ -37,8 +37,8 @@ _EXPORTS = {
     "HandModel": "retarget.hands",
     # retargeting
     "Retargeter": "retarget.retargeter",
-    "RetargetConfig": "retarget.retargeter",
-    "RobotTrajectory": "retarget.retargeter",
+    "RetargetConfig": "retarget.config",
+    "RobotTrajectory": "retarget.robot_trajectory",
     "retarget_keypoints": "retarget.keypoint_input",
     # re-simulation, force calibration, refinement
     "Resimulator": "retarget.validate",

@@ -20,7 +20,7 @@ demonstrations are generated ones by another operator and seed than the benchmar
 (``operator2``, seed 1) of pairs past the benchmarks' suites (from the 41st pair of their
 order), so the benchmarks judge the offset on motions and pairs it was not measured on. The
 result goes in the hand module as ``HandModel.wrist_offset``; with
-``RetargetConfig.use_wrist_offset`` on, ``Retargeter.human_targets`` aims the wrist at the
+``RetargetConfig.wrist.use_offset`` on, ``Retargeter.human_targets`` aims the wrist at the
 human wrist pose composed with it.
 
 Measured with ``benchmarks/retarget_speed_quality.py --hands shadow allegro leap inspire
@@ -31,7 +31,7 @@ with: Shadow 10.41 → 10.31 mm (65 → 65 %), Allegro 19.09 → 18.53 mm (30 �
 → 40 %), SVH 16.49 → 15.05 mm (45 → 45 %); all six 16.8 → 15.8 mm (dex-retargeting 14.9),
 45 → 42 % strict (dex-retargeting 13 %). The wrist rotation weight 0 instead (Inspire,
 Ability, SVH): 17.87 / 14.02 / 13.90 mm, Inspire's strict success 35 → 25 %. On by default
-(``use_wrist_offset``) since 2026-12-03: all 7 hands at 5e2fe8e, 19.54 → 18.61 mm keypoint
+(``wrist.use_offset``) since 2026-12-03: all 7 hands at 5e2fe8e, 19.54 → 18.61 mm keypoint
 error, 40 → 39 % strict; Allegro's hold of the heavy built-in cube with force matching
 (``retarget run --hand allegro --pair cube2H/tripod --forces``) needs Allegro's joint limit
 margin with it (``HandModel.joint_limit_margin``; without it the cube drops, 12.1 cm).
@@ -55,11 +55,12 @@ from scipy.spatial.transform import Rotation
 from dexcanvas_core.demos import feasible_pairs, generate_demo, spread_pairs
 from dexcanvas_core.demos import operator as operator_by_name
 from dexcanvas_core.demos.geometry import object_geometry
+from retarget.config import RetargetConfig
 from retarget.errors import RetargetError
 from retarget.hands import get_hand
 from retarget.hands.base import WRIST_JOINTS, WRIST_SITE
 from retarget.pipeline import check_pair
-from retarget.retargeter import RetargetConfig, Retargeter
+from retarget.retargeter import Retargeter
 
 log = logging.getLogger(__name__)
 
@@ -73,6 +74,7 @@ CALIBRATION_SKIP = 40
 @dataclass(frozen=True)
 class WristCalibration:
     """The measured offset and how well one constant offset describes the frames."""
+
     hand: str
     rotvec: np.ndarray
     """(3,) [rad] mean robot wrist rotation in the human wrist frame (rotation vector)."""
@@ -163,7 +165,7 @@ def calibration_demos(
 
 def wrist_in_target_frame(retargeter, traj, Q: np.ndarray, targets: dict | None = None):
     """Per frame, the robot wrist site's pose in the frame of ``retargeter``'s wrist targets
-    (the human wrist pose when ``use_wrist_offset`` is off or the hand has no offset):
+    (the human wrist pose when ``wrist.use_offset`` is off or the hand has no offset):
     ``(rotations (T, 3, 3), positions (T, 3) [m])``."""
     tg = retargeter.human_targets(traj) if targets is None else targets
     R_h, p_h = tg["wrist_R"], tg["wrist_p"]
@@ -209,10 +211,11 @@ def calibrate_wrist(
     """Measure ``hand``'s wrist offset on ``demos`` (``[(pair, trajectory)]``; see the module
     docstring). ``on_pair`` is called with each pair's name once it is solved; ``seed``, the
     demonstrations' seed, only goes into the ``source`` note."""
-    cfg = RetargetConfig(
-        w_wrist_pos=0.0, w_wrist_rot=0.0, w_posture=0.0, w_smooth=0.0, use_contacts=False,
-        use_collision=False, use_self_collision=False, use_wrist_offset=False,
-    )  # fmt: skip
+    cfg = RetargetConfig.from_overrides({
+        "wrist.position_weight": 0.0, "wrist.rotation_weight": 0.0, "wrist.use_offset": False,
+        "posture.weight": 0.0, "smoothness.weight": 0.0, "contacts.enabled": False,
+        "collision.enabled": False, "self_collision.enabled": False,
+    })  # fmt: skip
     probe = Retargeter(hand, None, cfg)
     locked = proximal_joints(probe)
     if locked:  # held at their default posture (a narrow range: the QP keeps its bounds)
@@ -261,6 +264,7 @@ def calibrate_wrist(
 @dataclass(frozen=True)
 class CalibrateConfig:
     """``retarget calibrate-wrist``."""
+
     hand: str
     n_pairs: int = 8
     operator: str = CALIBRATION_OPERATOR

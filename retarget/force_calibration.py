@@ -119,8 +119,9 @@ class ForceCalibrationResult:
 
 
 def human_target(robot, force_scale: float = 1.0) -> np.ndarray:
-    """(T, F, 3) [N]: the forces calibration presses towards, ``force_scale`` × the human's per
-    finger (``robot.human_force``, set by force matching)."""
+    """(T, F, 3) [N]: the forces calibration presses towards, ``force_scale``
+    (``RetargetConfig.force_matching.scale``) × the human's per finger (``robot.human_force``,
+    set by force matching)."""
     if robot.human_force is None:
         raise RetargetError(
             "force calibration matches the human's forces: retarget with force matching "
@@ -293,12 +294,12 @@ def calibrate_forces(
     progress: Callable[[int, int], None] | None = None,
 ) -> ForceCalibrationResult:
     """Calibrate force-matched ``robot`` (a ``RobotTrajectory`` of ``human`` made by
-    ``retargeter`` with ``force_matching``) in ``resimulator``'s scene (module doc).
+    ``retargeter`` with ``force_matching.enabled``) in ``resimulator``'s scene (module doc).
 
     ``sim``: the input commands' re-simulation, when already run (it is iterate 0).
     Returns the chosen iterate and every iterate's success and force error."""
     cfg = (cfg or ForceCalibrationConfig()).validate()
-    target = human_target(robot, retargeter.cfg.force_scale)
+    target = human_target(robot, retargeter.cfg.force_matching.scale)
     m, nq = resimulator.model, resimulator.hand_nq
     if robot.q.shape[1] != nq:
         raise RetargetError(

@@ -26,7 +26,34 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from retarget._checks import check_range
 from retarget.errors import RetargetError
+
+
+@dataclass(frozen=True, kw_only=True)
+class ForceMatchingConfig:
+    """Force matching: the human's per-finger contact forces (force pipeline output)
+    distributed over the robot's contacts by the force QP (:func:`distribute`) and applied
+    through the servo gains (:func:`squeeze_offsets`), in place of the grip. Needs a trajectory
+    with contact records carrying forces. Chosen on the force-preservation benchmark;
+    docs/method.md#force-matching."""
+
+    enabled: bool = False
+    """Replace the grip by force matching. Default False."""
+    scale: float = 1.0
+    """Multiple of the human's per-finger forces asked of the force QP (the object's wrench
+    stays the required one, so the extra is squeeze between the fingers). Default 1."""
+    tangent_weight: float = 0.05
+    """``ContactsConfig.tangent_weight`` when force matching is on. Default 0.05."""
+    idle_contact_clearance: float | None = 0.001
+    """A finger the captured hand touches the object with while the human's simulated finger
+    does not press is commanded this far [m] off the surface where the kinematic solution
+    leaves it nearer; None: its command is the kinematic solution. Default 0.001."""
+
+    def __post_init__(self):
+        check_range(self, "scale", positive=True)
+        check_range(self, "tangent_weight")
+        check_range(self, "idle_contact_clearance", optional=True, upper=0.02, unit="m")
 
 
 def tangent_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

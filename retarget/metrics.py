@@ -7,7 +7,6 @@ scores themselves are in :mod:`retarget.force_scores`.
 
 from __future__ import annotations
 
-from dataclasses import asdict
 from types import SimpleNamespace
 
 import numpy as np
@@ -201,7 +200,7 @@ def run_metrics(result: PipelineResult, cfg: RunConfig) -> dict:
         "contacts_off_target": [f for f, e in per_finger.items() if e > CONTACT_OFF_TARGET_M],
         "ms_per_frame": robot.ms_per_frame,
         "setup_s": result.setup_s,
-        "retarget_config": asdict(rt.cfg),
+        "retarget_config": rt.cfg.flat(),
         "retarget_overrides": dict(cfg.overrides),
         "demonstration_of": result.substituted or str(pair),
         "object": object_record(pair.object.id),

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import ast
 import dataclasses
+import difflib
 
 from retarget.errors import RetargetError
 
@@ -25,25 +26,40 @@ def parse_override(text: str) -> tuple[str, object]:
 
 
 def build_config(config_cls, overrides: dict, option: str = "--set", reserved=None, **fixed):
-    """``config_cls(**overrides, **fixed)``, validated (``validate()`` where it has one).
+    """``config_cls`` with ``overrides`` and ``fixed`` (``fixed`` last), validated.
 
-    ``overrides`` come from the shell's ``option``; ``reserved`` maps the fields that have their
-    own option (``{"force_matching": "--forces"}``) to it. An unknown field, a reserved one or a
-    value the config refuses raises ``RetargetError`` naming ``option`` and the field."""
-    names = {f.name for f in dataclasses.fields(config_cls)}
-    reserved = reserved or {}
+    A config with named settings (``RetargetConfig``: dotted paths such as ``contacts.weight``
+    and the flat names of ``retarget.config.FLAT_NAMES``) is built by its ``from_overrides``;
+    another by ``config_cls(**overrides, **fixed)`` and its ``validate()`` where it has one.
+    ``overrides`` come from the shell's ``option``; ``reserved`` maps the settings that have
+    their own option (``{"force_matching": "--forces"}``; either name of a setting) to it. An
+    unknown name (with the close matches), a reserved one or a value the config refuses raises
+    ``RetargetError`` naming ``option`` and the setting."""
     over = dict(overrides)
-    bad = sorted(set(over) - names)
+    if hasattr(config_cls, "from_overrides"):
+        canonical, names = config_cls.canonical_name, config_cls.setting_names()
+        aliases = config_cls.alias_names()
+    else:
+        names = [f.name for f in dataclasses.fields(config_cls)]
+        canonical, aliases = (lambda k: k if k in names else None), []
+    own_option = {canonical(k): v for k, v in (reserved or {}).items()}
+    bad = [k for k in over if canonical(k) is None]
     if bad:
+        close = [c for k in bad for c in difflib.get_close_matches(k, [*names, *aliases], n=3)]
+        hint = f" (did you mean {', '.join(dict.fromkeys(close))}?)" if close else ""
         raise RetargetError(
-            f"{option}: unknown {config_cls.__name__} field(s) {', '.join(bad)}; available: "
-            f"{', '.join(sorted(names - set(reserved)))}"
+            f"{option}: unknown {config_cls.__name__} field(s) {', '.join(bad)}{hint}; "
+            f"available: {', '.join(sorted(n for n in names if n not in own_option))}"
         )
-    own = sorted(set(over) & set(reserved))
+    own = [k for k in over if canonical(k) in own_option]
     if own:
-        uses = "; ".join(f"{k} is the run's own option, use {reserved[k]}" for k in own)
+        uses = "; ".join(
+            f"{k} is the run's own option, use {own_option[canonical(k)]}" for k in own
+        )
         raise RetargetError(f"{option}: {uses}")
     try:
+        if hasattr(config_cls, "from_overrides"):
+            return config_cls.from_overrides({**over, **fixed})
         cfg = config_cls(**over, **fixed)
         return cfg.validate() if hasattr(cfg, "validate") else cfg
     except Exception as e:  # the config's own checks, e.g. a negative weight

@@ -24,6 +24,7 @@ from dexcanvas_core.sim.mpc import MPCConfig
 from dexcanvas_core.sim.pipeline import SimConfig, simulate
 from dexcanvas_core.table import table_of
 from dexcanvas_core.trajectory import Trajectory
+from retarget.config import RetargetConfig
 from retarget.errors import RetargetError
 from retarget.force_calibration import (
     ForceCalibrationConfig,
@@ -35,7 +36,8 @@ from retarget.loading import load_subject, parse_pair
 from retarget.overrides import build_config
 from retarget.progress import Progress
 from retarget.refine import RefineConfig, RefineResult, calibrate_refined, refine
-from retarget.retargeter import RetargetConfig, Retargeter, RobotTrajectory
+from retarget.retargeter import Retargeter
+from retarget.robot_trajectory import RobotTrajectory
 from retarget.time_scale import check_time_scale, time_scaled
 from retarget.validate import (
     FORCE_CONTACT_TIMECONST,
@@ -79,7 +81,7 @@ class RunConfig:
     force-matched commands as planned."""
     force_scale: float = 1.0
     """Force matching presses with this multiple of the human's forces
-    (``RetargetConfig.force_scale``: a grip margin); needs ``forces``."""
+    (``RetargetConfig.force_matching.scale``: a grip margin); needs ``forces``."""
     human_replay: bool = False
     """Also run the force pipeline again at another seed of its sampling MPC
     (``HUMAN_REPLAY_SEED``) and score its per-finger forces against the matched ones as the
@@ -268,7 +270,7 @@ def retarget_demonstration(
     config = RetargetConfig() if config is None else config
     subject = parse_pair(subject) if isinstance(subject, str) else subject
     hand = get_hand(hand) if isinstance(hand, str) else hand
-    forces = config.force_matching
+    forces = config.force_matching.enabled
     if human_replay and not forces:
         raise RetargetError("a human replay scores force matching: set force_matching")
     geometry = object_geometry(subject.object.id)
@@ -327,12 +329,12 @@ def refine_lost(
     refined = refine(hand, result.geometry, traj, robot, rt.tip_sites, config)
     if task is not None:
         task(1, 1)
-    if refined.success and rt.cfg.force_matching and calibrate_iterations > 0:
+    if refined.success and rt.cfg.force_matching.enabled and calibrate_iterations > 0:
         n = calibrate_iterations
         task = _task(progress, f"calibrating the refined forces ({n} replays)", 1)
         refined = calibrate_refined(
             hand, result.geometry, traj, robot, rt.tip_sites, refined, config,
-            ForceCalibrationConfig(iterations=n), rt.cfg.force_scale,
+            ForceCalibrationConfig(iterations=n), rt.cfg.force_matching.scale,
         )  # fmt: skip
         if task is not None:
             task(1, 1)

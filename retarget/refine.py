@@ -172,7 +172,7 @@ def calibrate_refined(
     """Force calibration (:mod:`retarget.force_calibration`) of a refinement's servo targets in
     its own scene: the refined targets ``refined.ctrl`` replayed open loop (the tracker with no
     residual), each robot finger's force compared with the human's (``robot.human_force`` ×
-    ``force_scale``), each finger's targets corrected, ``calibration.iterations`` times
+    ``force_matching.scale``), each finger's targets corrected, ``calibration.iterations`` times
     (a ``ForceCalibrationConfig``). Iterate 0 is the refinement's own rollout; the result is
     ``refined`` with the chosen iterate's targets, errors and forces, and ``calibration`` set
     (its ``compute_s`` added). ``cfg``: the refinement's configuration (its scene)."""

@@ -30,7 +30,7 @@ def human_from_robot_poses(rt, Q: np.ndarray, uuid: str = "robot-poses"):
 
     Q = np.atleast_2d(np.asarray(Q, float))
     T = Q.shape[0]
-    off = rt.hand.wrist_offset if rt.cfg.use_wrist_offset else None
+    off = rt.hand.wrist_offset if rt.cfg.wrist.use_offset else None
     kp = np.zeros((T, 21, 3))
     pos, rot = np.zeros((T, 3)), np.zeros((T, 3))
     for t, q in enumerate(Q):

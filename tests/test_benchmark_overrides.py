@@ -15,8 +15,8 @@ from dexcanvas_core.example import example_trajectories
 from dexcanvas_core.sim.tracker import TrackingConfig
 from dexcanvas_core.taxonomy import Pair
 from retarget.baselines import DexRetargetingBaseline
+from retarget.config import RetargetConfig
 from retarget.hands import get_hand
-from retarget.retargeter import RetargetConfig
 
 
 def test_override_parses_python_literals():
@@ -63,7 +63,7 @@ def test_retarget_benchmark_set_checks_names_and_values_before_any_run():
     for argv, message in (
         (["--set", "w_postur=0"], "unknown RetargetConfig field"),
         (["--set", "w_posture=-1"], "must be finite and >= 0"),
-        (["--set", "grip='squeeze'"], "unknown grip"),
+        (["--set", "grip='squeeze'"], "GripConfig.mode: unknown value 'squeeze'"),
     ):
         with pytest.raises(SystemExit, match=message):
             bench.main([*argv, "--out", "/nonexistent/never-written.json"])

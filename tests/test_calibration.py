@@ -14,9 +14,10 @@ from dexcanvas_core.example import example_trajectories
 from dexcanvas_core.rotations import aa_to_matrix
 from retarget.calibration import calibrate_wrist, calibration_demos, wrist_in_target_frame
 from retarget.cli import main
+from retarget.config import RetargetConfig, WristConfig
 from retarget.errors import HandModelError, RetargetError
 from retarget.hands import WristOffset, available_hands, get_hand
-from retarget.retargeter import RetargetConfig, Retargeter
+from retarget.retargeter import Retargeter
 
 KNOWN = WristOffset(rotvec=(0.10, -0.25, 0.30), translation=(0.012, -0.020, 0.015))
 
@@ -62,7 +63,7 @@ def test_targets_follow_the_offset_and_the_switch_turns_it_off():
     traj = next(t for t in example_trajectories(seed=0) if t.scene == "cube2").slice(100, 130)
     hand = dataclasses.replace(get_hand("shadow"), wrist_offset=KNOWN)
     on = Retargeter(hand, None, RetargetConfig())  # on by default
-    off = Retargeter(hand, None, RetargetConfig(use_wrist_offset=False))
+    off = Retargeter(hand, None, RetargetConfig(wrist=WristConfig(use_offset=False)))
     t_on, t_off = on.human_targets(traj), off.human_targets(traj)
     R_h = aa_to_matrix(traj.hand.global_rot_aa.astype(np.float64))
     np.testing.assert_allclose(t_off["wrist_R"], R_h)
@@ -103,7 +104,7 @@ def test_calibration_recovers_a_known_offset(name):
     offset: the wrist-free solve puts the robot wrist back on the robot's poses, and the
     calibration returns that offset (the hand's own offset plays no part)."""
     truth = dataclasses.replace(get_hand(name), wrist_offset=KNOWN)
-    maker = Retargeter(truth, None, RetargetConfig(use_wrist_offset=True))
+    maker = Retargeter(truth, None, RetargetConfig(wrist=WristConfig(use_offset=True)))
     rng = np.random.default_rng(4)
     demos = [
         (f"motion{k}", human_from_robot_poses(maker, _robot_motion(maker, rng))) for k in (0, 1)
@@ -127,7 +128,7 @@ def test_calibration_recovers_a_known_offset(name):
     err = {}
     for label, o in (("calibrated", off), ("none", None)):
         hand = dataclasses.replace(get_hand(name), wrist_offset=o)
-        rt = Retargeter(hand, None, RetargetConfig(use_wrist_offset=True))
+        rt = Retargeter(hand, None, RetargetConfig(wrist=WristConfig(use_offset=True)))
         out = rt.retarget(traj)
         err[label] = out.keypoint_err.mean()
         if o is not None:

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from finger_scenes import finger_pressing_a_fixed_box
 
+from retarget.config import ForceMatchingConfig, RetargetConfig
 from retarget.errors import RetargetError
 from retarget.force_calibration import (
     ForceCalibrationConfig,
@@ -140,13 +141,13 @@ def shadow_force_matched():
     from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.sim.pipeline import SimConfig, simulate
     from retarget.hands import get_hand
-    from retarget.retargeter import RetargetConfig, Retargeter
+    from retarget.retargeter import Retargeter
     from retarget.validate import FORCE_CONTACT_TIMECONST, Resimulator, ValidateConfig
 
     demo = generate_demo("cube2/tripod", "operator1", seed=0).trajectory
     human = simulate(demo, SimConfig(tracker="open_loop")).trajectory
     hand, geo = get_hand("shadow"), object_geometry("cube2")
-    rt = Retargeter(hand, geo, RetargetConfig(force_matching=True))
+    rt = Retargeter(hand, geo, RetargetConfig(force_matching=ForceMatchingConfig(enabled=True)))
     robot = rt.retarget(human)
     resim = Resimulator(hand, geo, ValidateConfig(contact_timeconst=FORCE_CONTACT_TIMECONST))
     return rt, resim, robot, human

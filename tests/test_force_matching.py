@@ -9,6 +9,16 @@ from finger_scenes import finger_pressing_a_fixed_box
 
 from benchmarks.force_preservation.jobs import _hand_job
 from dexcanvas_core.taxonomy import OBJECTS
+from retarget.config import (
+    ClosingConfig,
+    ContactsConfig,
+    ForceMatchingConfig,
+    GripConfig,
+    PostureConfig,
+    RetargetConfig,
+    SolverConfig,
+    WristConfig,
+)
 from retarget.errors import RetargetError
 from retarget.force_matching import distribute, grasp_matrix, squeeze_offsets
 
@@ -212,11 +222,13 @@ def test_retargeter_matches_the_human_object_force(human_with_forces):
     from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.rotations import aa_to_matrix
     from retarget.hands import get_hand
-    from retarget.retargeter import RetargetConfig, Retargeter
+    from retarget.retargeter import Retargeter
 
     traj = human_with_forces.slice(300, 420)  # grasp held, object lifted
     r = Retargeter(
-        get_hand("allegro"), object_geometry("cube2"), RetargetConfig(force_matching=True)
+        get_hand("allegro"),
+        object_geometry("cube2"),
+        RetargetConfig(force_matching=ForceMatchingConfig(enabled=True)),
     )
     out = r.retarget(traj)
     assert out.robot_force.shape == (traj.num_frames, len(r.tip_sites), 3)
@@ -312,7 +324,7 @@ def test_force_scale_squeezes_harder_with_the_same_object_force(human_with_force
     from dexcanvas_core.demos.geometry import object_geometry
     from retarget.errors import RetargetError
     from retarget.hands import get_hand
-    from retarget.retargeter import RetargetConfig, Retargeter
+    from retarget.retargeter import Retargeter
 
     traj = human_with_forces.slice(300, 420)  # grasp held, object lifted
     outs = {}
@@ -320,7 +332,7 @@ def test_force_scale_squeezes_harder_with_the_same_object_force(human_with_force
         r = Retargeter(
             get_hand("allegro"),
             object_geometry("cube2"),
-            RetargetConfig(force_matching=True, force_scale=k),
+            RetargetConfig(force_matching=ForceMatchingConfig(enabled=True, scale=k)),
         )
         outs[k] = r.retarget(traj)
     np.testing.assert_array_equal(outs[1.0].human_force, outs[1.5].human_force)
@@ -336,8 +348,8 @@ def test_force_scale_squeezes_harder_with_the_same_object_force(human_with_force
     depth = {k: np.abs(o.q_command - o.q)[touching, 6:].sum(1) for k, o in outs.items()}
     assert np.median(depth[1.5]) > 1.2 * np.median(depth[1.0])
     for bad in (0.0, -1.0, float("nan"), float("inf")):
-        with pytest.raises(RetargetError, match="force_scale"):
-            RetargetConfig(force_matching=True, force_scale=bad).validate()
+        with pytest.raises(RetargetError, match=r"ForceMatchingConfig\.scale"):
+            RetargetConfig(force_matching=ForceMatchingConfig(enabled=True, scale=bad))
 
 
 def test_force_scale_without_forces_says_what_to_do(tmp_path, capsys):
@@ -358,7 +370,7 @@ def test_contact_flags_come_from_the_captured_geometry_unless_asked(human_with_f
 
     from dexcanvas_core.demos.geometry import object_geometry
     from retarget.hands import get_hand
-    from retarget.retargeter import RetargetConfig, Retargeter
+    from retarget.retargeter import Retargeter
 
     traj = human_with_forces.slice(250, 420)
     bare = dataclasses.replace(traj, contacts=None)
@@ -368,26 +380,29 @@ def test_contact_flags_come_from_the_captured_geometry_unless_asked(human_with_f
     assert a["contact_active"].sum() > 100
     for k in ("contact_active", "contact_part", "contact_points"):
         np.testing.assert_array_equal(a[k], b[k])
-    rec = Retargeter(hand, geom, RetargetConfig(contacts_from="records"))
+    rec = Retargeter(hand, geom, RetargetConfig(contacts=ContactsConfig(source="records")))
     c = rec.human_targets(traj)
     parts = rec._parts_from_records(traj)  # (T, F, 3)
     assert c["contact_active"].sum() > 100
     assert not (c["contact_active"] & ~parts.any(-1)).any()  # only where a record says so
     assert c["contact_active"][parts[..., 0]].all()  # every recorded fingertip contact
     assert (c["contact_active"] != a["contact_active"]).any()  # the two sources differ here
-    with pytest.raises(RetargetError, match="contacts_from"):
-        RetargetConfig(contacts_from="sim").validate()
+    allowed = r"ContactsConfig\.source: unknown value 'sim'; allowed: geometry, records"
+    with pytest.raises(RetargetError, match=allowed):
+        RetargetConfig(contacts=ContactsConfig(source="sim"))
 
 
 def test_force_matching_without_forces_says_what_to_do():
     from dexcanvas_core.demos import generate_demo
     from dexcanvas_core.demos.geometry import object_geometry
     from retarget.hands import get_hand
-    from retarget.retargeter import RetargetConfig, Retargeter
+    from retarget.retargeter import Retargeter
 
     demo = generate_demo("cube2/tripod", "operator1", seed=0).trajectory.slice(0, 20)
     r = Retargeter(
-        get_hand("allegro"), object_geometry("cube2"), RetargetConfig(force_matching=True)
+        get_hand("allegro"),
+        object_geometry("cube2"),
+        RetargetConfig(force_matching=ForceMatchingConfig(enabled=True)),
     )
     with pytest.raises(RetargetError, match="dexcanvas simulate"):
         r.retarget(demo)
@@ -489,7 +504,7 @@ def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
     from dexcanvas_core.rotations import aa_to_matrix
     from retarget.hands import get_hand
     from retarget.refine import RefineConfig, refine
-    from retarget.retargeter import RetargetConfig, Retargeter
+    from retarget.retargeter import Retargeter
 
     demo = load_demonstration("cuboid3/palmar_pinch")  # the built-in one
     hand, geo = get_hand("allegro"), object_geometry("cuboid3")
@@ -497,14 +512,12 @@ def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
         hand,
         geo,
         RetargetConfig(
-            grip="depth",
-            warm_start_extrapolate=False,
-            contact_tangent_weight=1.0,
-            w_wrist_pos=0.3,
-            w_wrist_rot=0.3,
-            w_posture=1e-3,
-            contact_hover_m=None,
-            w_closing=0.0,
+            grip=GripConfig(mode="depth"),
+            solver=SolverConfig(warm_start_extrapolate=False),
+            contacts=ContactsConfig(tangent_weight=1.0, hover_m=None),
+            wrist=WristConfig(position_weight=0.3, rotation_weight=0.3),
+            posture=PostureConfig(weight=1e-3),
+            closing=ClosingConfig(weight=0.0),
         ),
     )
     robot = rt.retarget(demo)
@@ -1013,12 +1026,24 @@ def test_force_matching_backs_unloaded_touching_fingers_off_the_surface(human_wi
     nowhere the human did not); frames without such a finger are commanded as without it."""
     from dexcanvas_core.demos.geometry import object_geometry
     from retarget.hands import get_hand
-    from retarget.retargeter import RetargetConfig, Retargeter
+    from retarget.retargeter import Retargeter
 
     traj = human_with_forces.slice(200, 450)
     hand, geom = get_hand("shadow"), object_geometry("cube2")
-    rt = Retargeter(hand, geom, RetargetConfig(force_matching=True, idle_contact_clearance=0.001))
-    off = Retargeter(hand, geom, RetargetConfig(force_matching=True, idle_contact_clearance=None))
+    rt = Retargeter(
+        hand,
+        geom,
+        RetargetConfig(
+            force_matching=ForceMatchingConfig(enabled=True, idle_contact_clearance=0.001)
+        ),
+    )
+    off = Retargeter(
+        hand,
+        geom,
+        RetargetConfig(
+            force_matching=ForceMatchingConfig(enabled=True, idle_contact_clearance=None)
+        ),
+    )
     out, ref = rt.retarget(traj), off.retarget(traj)
     tg = rt.human_targets(traj)
     idle = tg["contact_active"] & (np.linalg.norm(out.human_force, axis=2) <= 1e-3)
@@ -1046,5 +1071,5 @@ def test_force_matching_backs_unloaded_touching_fingers_off_the_surface(human_wi
     plain = ~idle.any(axis=1)
     np.testing.assert_allclose(out.q_command[plain], ref.q_command[plain], atol=1e-12)
     assert not np.allclose(out.q_command[~plain], ref.q_command[~plain])
-    with pytest.raises(RetargetError, match="idle_contact_clearance"):
-        RetargetConfig(idle_contact_clearance=-0.001).validate()
+    with pytest.raises(RetargetError, match=r"ForceMatchingConfig\.idle_contact_clearance"):
+        RetargetConfig(force_matching=ForceMatchingConfig(idle_contact_clearance=-0.001))

@@ -15,10 +15,23 @@ from dexcanvas_core.io import write_dataset
 from dexcanvas_core.rotations import aa_to_matrix
 from dexcanvas_core.trajectory import Trajectory
 from retarget.cli import main
+from retarget.config import (
+    CollisionConfig,
+    ContactsConfig,
+    ForceMatchingConfig,
+    JointLimitsConfig,
+    KeypointsConfig,
+    PostureConfig,
+    RetargetConfig,
+    SmoothnessConfig,
+    SolverConfig,
+    VelocityConfig,
+    WristConfig,
+)
 from retarget.errors import HandModelError, RetargetError
 from retarget.hands import get_hand
 from retarget.kinematics import MujocoKinematics, PinocchioKinematics
-from retarget.retargeter import RetargetConfig, Retargeter
+from retarget.retargeter import Retargeter
 from retarget.state import RobotState
 
 
@@ -42,11 +55,10 @@ def test_round_trip_recovers_robot_keypoints(hand_name):
         hand,
         None,
         RetargetConfig(
-            first_frame_iterations=60,
-            iterations=10,
-            w_posture=0.0,
-            w_smooth=0.0,
-            max_joint_speed=1e3,
+            solver=SolverConfig(first_frame_iterations=60, iterations=10),
+            posture=PostureConfig(weight=0.0),
+            smoothness=SmoothnessConfig(weight=0.0),
+            velocity=VelocityConfig(max_joint_speed=1e3),
         ),
     )
     rng = np.random.default_rng(0)
@@ -99,17 +111,19 @@ def test_backends_agree_on_kinematic_terms(demo):
 def test_mink_backend_runs_and_matches(demo):
     hand = get_hand("allegro")
     geo = object_geometry("cube2")
-    a = Retargeter(hand, geo, RetargetConfig(backend="pinocchio")).retarget(demo)
-    b = Retargeter(hand, geo, RetargetConfig(backend="mink")).retarget(demo)
+    a = Retargeter(hand, geo, RetargetConfig(solver=SolverConfig(backend="pinocchio"))).retarget(
+        demo
+    )
+    b = Retargeter(hand, geo, RetargetConfig(solver=SolverConfig(backend="mink"))).retarget(demo)
     # Same objectives and hand–object rows; the self-collision limit is mink's own, so the
     # solutions agree to within a few millimetres of keypoint error.
     assert abs(a.keypoint_err.mean() - b.keypoint_err.mean()) < 5e-3
     # The hand–object rows and the wrist's speed bound hold on mink too (with mink's own
     # collision limit this demo went 3.2 mm into the cube).
     cfg = RetargetConfig()
-    assert b.min_distance[1:].min() > -(cfg.penetration_margin + 5e-4)
+    assert b.min_distance[1:].min() > -(cfg.collision.penetration_margin + 5e-4)
     dt = np.diff(demo.timestamp)[:, None]
-    assert (np.abs(np.diff(b.q[:, :3], axis=0)) <= cfg.max_wrist_speed * dt + 1e-6).all()
+    assert (np.abs(np.diff(b.q[:, :3], axis=0)) <= cfg.velocity.max_wrist_speed * dt + 1e-6).all()
 
 
 @pytest.mark.parametrize("backend", ["pinocchio", "mink"])
@@ -118,7 +132,11 @@ def test_shadow_distal_coupling_holds(demo, backend):
     hold along the retargeted trajectory on both backends, as the simulator enforces them."""
     from retarget.limits import CouplingLimit
 
-    rt = Retargeter(get_hand("shadow"), object_geometry("cube2"), RetargetConfig(backend=backend))
+    rt = Retargeter(
+        get_hand("shadow"),
+        object_geometry("cube2"),
+        RetargetConfig(solver=SolverConfig(backend=backend)),
+    )
     coupling = CouplingLimit.from_mjmodel(rt.scene.model)
     assert len(coupling.ranges) >= 4
     out = rt.retarget(demo)
@@ -132,7 +150,7 @@ def test_shadow_distal_coupling_holds(demo, backend):
 def test_no_penetration_beyond_margin(demo):
     cfg = RetargetConfig()
     out = Retargeter(get_hand("shadow"), object_geometry("cube2"), cfg).retarget(demo)
-    assert out.min_distance.min() > -(cfg.penetration_margin + 1e-3)
+    assert out.min_distance.min() > -(cfg.collision.penetration_margin + 1e-3)
     assert out.contact_active.any()
 
 
@@ -222,7 +240,9 @@ def test_surface_contact_tangent_weight_scales_only_the_tangential_pull(demo, ga
     from retarget.objectives.base import Objective
 
     alpha = 0.2
-    cfg = RetargetConfig(contact_tangent_weight=alpha, contact_hover_m=0.0 if gap else None)
+    cfg = RetargetConfig(
+        contacts=ContactsConfig(tangent_weight=alpha, hover_m=0.0 if gap else None)
+    )
     rt = Retargeter(get_hand("shadow"), object_geometry("cube2"), cfg)
     tg = rt.human_targets(demo)
     t = int(np.flatnonzero(tg["contact_active"].sum(axis=1) >= 2)[0])
@@ -250,16 +270,16 @@ def test_surface_contact_tangent_weight_scales_only_the_tangential_pull(demo, ga
     _, _, dist = rt.contacts.nearest_of(q, idx)
     for k, i in enumerate(idx):
         u = n[i] / np.linalg.norm(n[i])
-        W = rt.cfg.w_contacts * alpha * (np.eye(3) - np.outer(u, u))
+        W = rt.cfg.contacts.weight * alpha * (np.eye(3) - np.outer(u, u))
         Hm += J[k].T @ W @ J[k]
         cm += J[k].T @ W @ (P[k] - tg["contact_points"][t][i])
         if gap:  # the row d + gᵀ J Δq, g the distance's direction at the link's point
             g = rt.contacts._cache_g[i]
-            Hm += rt.cfg.w_contacts * np.outer(g @ J[k], g @ J[k])
-            cm += rt.cfg.w_contacts * dist[k] * (g @ J[k])
+            Hm += rt.cfg.contacts.weight * np.outer(g @ J[k], g @ J[k])
+            cm += rt.cfg.contacts.weight * dist[k] * (g @ J[k])
         else:
-            Hm += rt.cfg.w_contacts * np.outer(u @ J[k], u @ J[k])
-            cm += rt.cfg.w_contacts * (u @ (P[k] - tg["contact_points"][t][i])) * (u @ J[k])
+            Hm += rt.cfg.contacts.weight * np.outer(u @ J[k], u @ J[k])
+            cm += rt.cfg.contacts.weight * (u @ (P[k] - tg["contact_points"][t][i])) * (u @ J[k])
     np.testing.assert_allclose(H, Hm, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(c, cm, rtol=1e-9, atol=1e-9)
     assert np.abs(cm).max() > 1e-6
@@ -394,7 +414,7 @@ def test_cli_run_writes_outputs(small_dataset, tmp_path, capsys):
         (["--hand", "panda", "--pair", "sphere1/rolling"], "cannot perform 'rolling'"),
         (
             ["--hand", "shadow", "--pair", "cube2/tripod", "--set", "w_contact=1"],
-            "unknown RetargetConfig field(s) w_contact; available:",
+            "unknown RetargetConfig field(s) w_contact (did you mean w_contacts",
         ),
         (
             ["--hand", "shadow", "--pair", "cube2/tripod", "--set", "force_matching=True"],
@@ -402,7 +422,7 @@ def test_cli_run_writes_outputs(small_dataset, tmp_path, capsys):
         ),
         (
             ["--hand", "shadow", "--pair", "cube2/tripod", "--set", "w_contacts=-1"],
-            "weight w_contacts must be finite and >= 0",
+            "ContactsConfig.weight must be finite and >= 0",
         ),
         (
             ["--hand", "shadow", "--pair", "cube2/tripod", "--set", "iterations=0"],
@@ -629,7 +649,9 @@ def test_link_contacts_hold_a_lateral_pinch_on_the_thumb_pad():
 
     traj = load_demonstration("cube2/lateral_pinch")
     geom = object_geometry(traj.object.name)
-    off = Retargeter(get_hand("shadow"), geom, RetargetConfig(use_link_contacts=False))
+    off = Retargeter(
+        get_hand("shadow"), geom, RetargetConfig(contacts=ContactsConfig(link_contacts=False))
+    )
     on = Retargeter(get_hand("shadow"), geom)
     thumb = on.tip_human.index("thumb")
     assert not off.human_targets(traj)["contact_active"][:, thumb].any()
@@ -638,7 +660,7 @@ def test_link_contacts_hold_a_lateral_pinch_on_the_thumb_pad():
     assert pad.sum() > 300 and (tg["contact_part"][pad, thumb] == 0).all()
     r = on.retarget(traj)
     assert np.nanmedian(r.contact_err[pad, thumb]) < 0.003
-    assert -r.min_distance.min() <= on.cfg.penetration_margin + 5e-4
+    assert -r.min_distance.min() <= on.cfg.collision.penetration_margin + 5e-4
 
 
 def test_a_fingertip_body_belongs_to_its_distal_link():
@@ -685,12 +707,20 @@ def test_joint_limit_margin_keeps_finger_joints_inside_their_ranges():
     traj = load_demonstration("cube2/tripod").slice(250, 400)
     geom = object_geometry(traj.object.name)
     hand = get_hand("allegro")
-    ctw = RetargetConfig().force_contact_tangent_weight
+    ctw = RetargetConfig().force_matching.tangent_weight
     plain = Retargeter(
-        hand, geom, RetargetConfig(joint_limit_margin=0.0, contact_tangent_weight=ctw)
+        hand,
+        geom,
+        RetargetConfig(
+            joint_limits=JointLimitsConfig(margin=0.0), contacts=ContactsConfig(tangent_weight=ctw)
+        ),
     )
     inner = Retargeter(
-        hand, geom, RetargetConfig(joint_limit_margin=0.1, contact_tangent_weight=ctw)
+        hand,
+        geom,
+        RetargetConfig(
+            joint_limits=JointLimitsConfig(margin=0.1), contacts=ContactsConfig(tangent_weight=ctw)
+        ),
     )
     j7 = plain.kin.joint_names.index("joint_7.0")
     q0 = plain.retarget(traj).q
@@ -698,17 +728,17 @@ def test_joint_limit_margin_keeps_finger_joints_inside_their_ranges():
     r = inner.retarget(traj)
     m = np.minimum(0.1, 0.25 * (inner.upper - inner.lower))
     fingers = slice(6, inner.nq)
-    tol = inner.cfg.step_tolerance
+    tol = inner.cfg.solver.step_tolerance
     assert (r.q[:, fingers] >= (inner.lower + m)[fingers] - tol).all()
     assert (r.q[:, fingers] <= (inner.upper - m)[fingers] + tol).all()
     assert r.q[:, j7].min() > inner.lower[j7] + 0.1 - tol
     assert (r.q_command >= inner.lower - 1e-9).all() and (r.q_command <= inner.upper + 1e-9).all()
-    with pytest.raises(RetargetError, match="joint_limit_margin"):
-        RetargetConfig(joint_limit_margin=-0.1).validate()
+    with pytest.raises(RetargetError, match=r"JointLimitsConfig\.margin"):
+        RetargetConfig(joint_limits=JointLimitsConfig(margin=-0.1))
 
 
 def test_joint_limit_margin_defaults_to_the_hands_own():
-    """``RetargetConfig.joint_limit_margin=None`` (the default) takes the hand's
+    """``RetargetConfig.joint_limits.margin=None`` (the default) takes the hand's
     ``HandModel.joint_limit_margin`` (Allegro 0.05 rad, the others 0); a number overrides it;
     the mink backend's configuration limit gets the same ranges."""
     geom = object_geometry("cube2")
@@ -722,9 +752,9 @@ def test_joint_limit_margin_defaults_to_the_hands_own():
         np.testing.assert_allclose(rt._solve_lower[fingers], (rt.lower + inner)[fingers])
         np.testing.assert_allclose(rt._solve_upper[fingers], (rt.upper - inner)[fingers])
         np.testing.assert_array_equal(rt._solve_lower[:6], rt.lower[:6])
-    zero = Retargeter(allegro, geom, RetargetConfig(joint_limit_margin=0.0))
+    zero = Retargeter(allegro, geom, RetargetConfig(joint_limits=JointLimitsConfig(margin=0.0)))
     np.testing.assert_array_equal(zero._solve_lower, zero.lower)
-    mk = Retargeter(allegro, geom, RetargetConfig(backend="mink"))
+    mk = Retargeter(allegro, geom, RetargetConfig(solver=SolverConfig(backend="mink")))
     cl = mk._mink.limits[0]
     lim = mk.scene.model.jnt_limited[: mk.nq].astype(bool)
     np.testing.assert_allclose(cl.lower[: mk.nq][lim], mk._solve_lower[lim])
@@ -741,7 +771,7 @@ def test_contact_parts_are_validated():
 
 
 def test_contact_ramp_rises_and_falls():
-    from retarget.retargeter import contact_ramp
+    from retarget.targets import contact_ramp
 
     active = np.zeros((12, 2), bool)
     active[2:10, 0] = True  # 8 frames
@@ -764,13 +794,14 @@ def test_onsets_do_not_snap_the_wrist():
     peak = {}
     for name, cfg in {
         "free": RetargetConfig(
-            max_wrist_speed=np.inf, keypoint_scaling="uniform", contact_tangent_weight=1.0
+            velocity=VelocityConfig(max_wrist_speed=np.inf),
+            keypoints=KeypointsConfig(scaling="uniform"),
+            contacts=ContactsConfig(tangent_weight=1.0),
         ),
         "ramp": RetargetConfig(
-            max_wrist_speed=np.inf,
-            keypoint_scaling="uniform",
-            contact_tangent_weight=1.0,
-            contact_ramp_s=0.1,
+            velocity=VelocityConfig(max_wrist_speed=np.inf),
+            keypoints=KeypointsConfig(scaling="uniform"),
+            contacts=ContactsConfig(tangent_weight=1.0, ramp_s=0.1),
         ),
         "default": RetargetConfig(),
     }.items():
@@ -793,9 +824,11 @@ def test_surface_scaling_keeps_touching_keypoints_touching():
     demo = next(t for t in example_trajectories(seed=0) if t.scene == "cube2")  # reach + grasp
     geom = object_geometry("cube2")
     rt = Retargeter(get_hand("shadow"), geom)
-    uni = Retargeter(get_hand("shadow"), geom, RetargetConfig(keypoint_scaling="uniform"))
-    s, blend, rho = rt.scale, rt.cfg.scale_blend_m, rt.cfg.finger_radius_m
-    assert s > 1.2 and rt.cfg.keypoint_scaling == "surface"
+    uni = Retargeter(
+        get_hand("shadow"), geom, RetargetConfig(keypoints=KeypointsConfig(scaling="uniform"))
+    )
+    s, blend, rho = rt.scale, rt.cfg.keypoints.scale_blend_m, rt.cfg.keypoints.finger_radius_m
+    assert s > 1.2 and rt.cfg.keypoints.scaling == "surface"
     h_kp = demo.hand.joint_pos.astype(np.float64)
     c = demo.object.pos.astype(np.float64)[:, None]
     R = np.stack([aa_to_matrix(a) for a in demo.object.rot_aa.astype(np.float64)])
@@ -826,16 +859,16 @@ def test_surface_scaling_keeps_touching_keypoints_touching():
     # Uniform scaling pushed the touching keypoints (s − 1)·r off: farther than this.
     assert (d_u[touch] - d_out[touch]).mean() > 0.005
     tg = rt.human_targets(demo)  # the wrist, keypoint and vector targets are these points
-    assert rt.cfg.use_wrist_offset  # the wrist target: the scaled wrist, then the offset
+    assert rt.cfg.wrist.use_offset  # the wrist target: the scaled wrist, then the offset
     R_h = aa_to_matrix(demo.hand.global_rot_aa.astype(np.float64))
     np.testing.assert_allclose(tg["wrist_p"], rt.hand.wrist_offset.apply(R_h, out[:, 0])[1])
     np.testing.assert_allclose(tg["keypoints"], out[:, rt.kp_index])
     a, b = rt.vec_human[0]
     np.testing.assert_allclose(tg["vectors"][:, 0], out[:, a] - out[:, b])
-    with pytest.raises(RetargetError, match="keypoint_scaling"):
-        RetargetConfig(keypoint_scaling="centre").validate()
-    with pytest.raises(RetargetError, match="max_wrist_speed"):
-        RetargetConfig(max_wrist_speed=0.0).validate()
+    with pytest.raises(RetargetError, match=r"KeypointsConfig\.scaling"):
+        RetargetConfig(keypoints=KeypointsConfig(scaling="centre"))
+    with pytest.raises(RetargetError, match=r"VelocityConfig\.max_wrist_speed"):
+        RetargetConfig(velocity=VelocityConfig(max_wrist_speed=0.0))
 
 
 def test_force_matching_takes_its_own_contact_tangent_weight():
@@ -843,14 +876,20 @@ def test_force_matching_takes_its_own_contact_tangent_weight():
     force matching, which places the human's forces at the human's contact points, holds them
     nearer (``force_contact_tangent_weight``). Bad values are refused by name."""
     hand, geom = get_hand("shadow"), object_geometry("cube2")
-    cfg = RetargetConfig(contact_tangent_weight=0.02, force_contact_tangent_weight=0.3)
+    cfg = RetargetConfig(
+        contacts=ContactsConfig(tangent_weight=0.02),
+        force_matching=ForceMatchingConfig(tangent_weight=0.3),
+    )
     assert Retargeter(hand, geom, cfg).contacts.tangent_weight == 0.02
-    fm = dataclasses.replace(cfg, force_matching=True)
+    fm = cfg.with_overrides({"force_matching.enabled": True})
     assert Retargeter(hand, geom, fm).contacts.tangent_weight == 0.3
-    for k in ("contact_tangent_weight", "force_contact_tangent_weight"):
+    for k, name in (
+        ("contact_tangent_weight", "ContactsConfig.tangent_weight"),
+        ("force_contact_tangent_weight", "ForceMatchingConfig.tangent_weight"),
+    ):
         for v in (-0.1, np.nan):
-            with pytest.raises(RetargetError, match=k):
-                RetargetConfig(**{k: v}).validate()
+            with pytest.raises(RetargetError, match=name):
+                RetargetConfig.from_overrides({k: v})
 
 
 def test_predicted_start_moves_the_wrist_as_the_human_and_the_fingers_at_their_velocity():
@@ -917,7 +956,9 @@ def test_predicted_warm_start_takes_fewer_steps_without_overshooting():
     geom = object_geometry(traj.object.name)
     out = {}
     for ws in (False, True):
-        rt = Retargeter(get_hand("shadow"), geom, RetargetConfig(warm_start_extrapolate=ws))
+        rt = Retargeter(
+            get_hand("shadow"), geom, RetargetConfig(solver=SolverConfig(warm_start_extrapolate=ws))
+        )
         solves = [0]
         step = rt._solve_step
 
@@ -965,10 +1006,14 @@ def test_links_the_human_keeps_clear_stay_clear(demo):
     assert tg["contact_by_part"].any() and not tg["contact_by_part"].all()
     r = rt.retarget(demo)
     d_on = closest_clear(rt, r, tg)
-    clear = rt.cfg.noncontact_clearance
+    clear = rt.cfg.collision.noncontact_clearance
     assert clear > 0 and d_on.min() > clear - 1e-3, d_on.min()
     np.testing.assert_array_equal(rt.collision.pair_margins, rt._base_margins)  # restored
-    off = Retargeter(get_hand("shadow"), geom, RetargetConfig(noncontact_clearance=0.0))
+    off = Retargeter(
+        get_hand("shadow"),
+        geom,
+        RetargetConfig(collision=CollisionConfig(noncontact_clearance=0.0)),
+    )
     d_off = closest_clear(off, off.retarget(demo), tg)
     assert d_off.min() < clear - 1e-3 < d_on.min()
     # The margins themselves: touching parts and the palm keep the penetration margin.
@@ -990,7 +1035,7 @@ def test_wrist_weight_scales_the_wrist_term(demo):
     shadow, panda = get_hand("shadow"), get_hand("panda")
     assert shadow.wrist_weight == 1.0 and panda.wrist_weight == 0.0
     assert get_hand("svh").wrist_weight == 0.0
-    cfg = RetargetConfig(w_wrist_pos=0.2, w_wrist_rot=0.1)
+    cfg = RetargetConfig(wrist=WristConfig(position_weight=0.2, rotation_weight=0.1))
     rt = Retargeter(dataclasses.replace(shadow, wrist_weight=0.5), geom, cfg)
     np.testing.assert_allclose(rt.wrist.weights(6), [0.1] * 3 + [0.05] * 3)
     assert rt.wrist in rt._objectives()

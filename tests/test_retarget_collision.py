@@ -10,12 +10,19 @@ from robot_poses import coupled, human_from_robot_poses
 
 from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.trajectory import Trajectory
+from retarget.config import (
+    PostureConfig,
+    RetargetConfig,
+    SelfCollisionConfig,
+    SmoothnessConfig,
+    SolverConfig,
+)
 from retarget.hands import available_hands, get_hand
 from retarget.hands.base import wrist_qpos_from_mano
 from retarget.kinematics import MujocoKinematics, PinocchioKinematics
 from retarget.limits import CollisionLimit
-from retarget.limits.collision import ContactSweep
-from retarget.retargeter import RetargetConfig, Retargeter
+from retarget.limits.sweep import ContactSweep
+from retarget.retargeter import Retargeter
 from retarget.state import RobotState
 
 HANDS = ["shadow", "allegro"]
@@ -95,12 +102,12 @@ def test_self_collision_pairs_join_different_parts_only(name):
 def test_config_rejects_bad_collision_settings():
     from retarget.errors import RetargetError
 
-    with pytest.raises(RetargetError, match="self_collision_margin"):
-        RetargetConfig(self_collision_margin=-1e-3).validate()
-    with pytest.raises(RetargetError, match="self_collision_distmax"):
-        RetargetConfig(self_collision_distmax=0.0).validate()
-    with pytest.raises(RetargetError, match="step_tolerance"):
-        RetargetConfig(step_tolerance=float("nan")).validate()
+    with pytest.raises(RetargetError, match=r"SelfCollisionConfig\.margin"):
+        RetargetConfig(self_collision=SelfCollisionConfig(margin=-1e-3))
+    with pytest.raises(RetargetError, match=r"SelfCollisionConfig\.distmax"):
+        RetargetConfig(self_collision=SelfCollisionConfig(distmax=0.0))
+    with pytest.raises(RetargetError, match=r"SolverConfig\.step_tolerance"):
+        RetargetConfig(solver=SolverConfig(step_tolerance=float("nan")))
 
 
 # ---------------------------------------------------------------- Jacobians vs finite differences
@@ -177,7 +184,7 @@ def test_self_collision_rows_match_finite_differences(rt):
     for _ in range(40):
         q = _random_pose(rt, rng)
         r = rt.self_collision.query(q)
-        if not r.index.size or (r.distance + rt.cfg.self_collision_margin < -1e-3).any():
+        if not r.index.size or (r.distance + rt.cfg.self_collision.margin < -1e-3).any():
             continue  # (a capped recovery row is not the plain linearisation)
         penetrating += int((r.distance < 0).any())
         checked += _check_rows(rt.self_collision, rt.kin, q, rng, errors)
@@ -219,10 +226,16 @@ def test_fingers_commanded_into_each_other_stay_apart(name):
     """Keypoints that drive two fingers through each other: with the limit the fingers stop at
     the margin, without it they follow the keypoints into each other."""
     hand = get_hand(name)
-    cfg = RetargetConfig(w_posture=0.0, w_smooth=0.0)
+    cfg = RetargetConfig(posture=PostureConfig(weight=0.0), smoothness=SmoothnessConfig(weight=0.0))
     on = Retargeter(hand, None, cfg)
     off = Retargeter(
-        hand, None, RetargetConfig(w_posture=0.0, w_smooth=0.0, use_self_collision=False)
+        hand,
+        None,
+        RetargetConfig(
+            posture=PostureConfig(weight=0.0),
+            smoothness=SmoothnessConfig(weight=0.0),
+            self_collision=SelfCollisionConfig(enabled=False),
+        ),
     )
     rng = np.random.default_rng(3)
     # A reachable pose (joint ranges, couplings) with two fingers deep inside each other.
@@ -238,7 +251,7 @@ def test_fingers_commanded_into_each_other_stay_apart(name):
     human = _human_from_robot_poses(on, Q)
     out_on = on.retarget(human)
     out_off = off.retarget(human)
-    margin = cfg.self_collision_margin
+    margin = cfg.self_collision.margin
     assert out_on.self_penetration_max_m <= margin + 5e-4, out_on.self_penetration_max_m
     assert out_off.self_penetration_max_m > margin + 3e-3, out_off.self_penetration_max_m
     # Without the limit the robot follows the keypoints (they come from its own poses).
@@ -489,7 +502,7 @@ def test_fingers_do_not_roll_into_a_cylinder(hand, pair):
     traj = load_demonstration(pair)
     rt = Retargeter(get_hand(hand), object_geometry(traj.object.name))
     r = rt.retarget(traj)
-    assert -r.min_distance.min() <= rt.cfg.penetration_margin + 5e-4
+    assert -r.min_distance.min() <= rt.cfg.collision.penetration_margin + 5e-4
     # Some frame's rows hold a pair twice (both ends of a finger link on the surface).
     multi = 0
     for t in np.flatnonzero(r.min_distance < 0.002)[::10]:

@@ -17,8 +17,9 @@ import pytest
 import trimesh
 
 from dexcanvas_core.rotations import aa_to_matrix, aa_to_quat_wxyz
+from retarget.config import ClosingConfig, ContactsConfig, RetargetConfig
 from retarget.hands import get_hand
-from retarget.retargeter import RetargetConfig, Retargeter
+from retarget.retargeter import Retargeter
 from retarget.state import RobotState
 
 PHONE = (0.15, 0.025, 0.075)  # x, y (the thin axis), z [m]
@@ -117,7 +118,7 @@ def _part_distances(rt: Retargeter, traj, q: np.ndarray) -> dict:
         for f, k in zip(*np.nonzero(by_part[t]), strict=True):
             parts = rt.contacts.part_geoms[f]
             if k < len(parts):
-                d = min(near.get(g, rt.cfg.collision_distmax) for g in parts[k])
+                d = min(near.get(g, rt.cfg.collision.distmax) for g in parts[k])
                 out.setdefault((rt.tip_human[f], int(k)), []).append(d)
     return out
 
@@ -137,7 +138,7 @@ def test_fingers_close_round_a_ball_larger_than_the_palm(shapes, hand):
     for key, d in dist.items():
         assert np.median(d) <= (0.0025 if key[1] == 0 else 0.005), (key, np.median(d))
         assert np.percentile(d, 90) <= 0.007, (key, np.percentile(d, 90))
-    old = RetargetConfig(contact_hover_m=None, w_closing=0.0)
+    old = RetargetConfig(contacts=ContactsConfig(hover_m=None), closing=ClosingConfig(weight=0.0))
     rt_old = Retargeter(get_hand(hand), geometry, old)
     before = _part_distances(rt_old, traj, rt_old.retarget(traj).q)
     assert max(np.median(d) for d in before.values()) > 0.01
@@ -241,7 +242,7 @@ def test_contacts_and_grip_use_the_mesh_surface(grasp):
     q_in = q.copy()
     q_in[6:] += 0.3  # the fingers closed into the ball, deeper than the margin
     q_in = np.minimum(q_in, rt.upper)
-    deep = rt.contacts.nearest_of(q_in, idx)[2] < -(rt.cfg.penetration_margin + 5e-4)
+    deep = rt.contacts.nearest_of(q_in, idx)[2] < -(rt.cfg.collision.penetration_margin + 5e-4)
     assert deep.any()
     inside = rt._surface_normals(q_in, idx, human)
     np.testing.assert_array_equal(inside[deep], human[deep])  # deeper: the human's normal

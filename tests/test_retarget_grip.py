@@ -9,8 +9,10 @@ import pytest
 from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.loaders.selection import load_demonstration
 from dexcanvas_core.rotations import aa_to_matrix
+from retarget.config import GripConfig, RetargetConfig
+from retarget.grip import opposed_contacts
 from retarget.hands import get_hand
-from retarget.retargeter import RetargetConfig, Retargeter, opposed_contacts
+from retarget.retargeter import Retargeter
 
 
 def test_opposed_contacts():
@@ -30,7 +32,7 @@ def lifted_run():
     traj = load_demonstration("cube1/quadpod")
     geom = object_geometry(traj.object.name)
     rt = Retargeter(get_hand("allegro"), geom)
-    assert rt.cfg.grip == "wrench"
+    assert rt.cfg.grip.mode == "wrench"
     return traj, geom, rt, rt.retarget(traj)
 
 
@@ -55,7 +57,7 @@ def test_grip_forces_carry_the_weight_off_the_table(lifted_run):
     W = rt._grip_targets(traj)["wrench"]
     np.testing.assert_allclose(W[still, 2], mg, rtol=0.05)
     rest = low < 1e-3
-    rest[np.flatnonzero(~rest)[0] - round(rt.cfg.grip_lead_s * traj.fps) - 1 :] = False
+    rest[np.flatnonzero(~rest)[0] - round(rt.cfg.grip.lead_s * traj.fps) - 1 :] = False
     assert rest.sum() > 50 and not W[rest].any()
 
 
@@ -74,14 +76,16 @@ def test_a_lone_finger_is_not_pressed_into_the_object(lifted_run):
 
 
 def test_depth_grip_still_available_and_validated():
-    rt = Retargeter(get_hand("allegro"), object_geometry("cube2"), RetargetConfig(grip="depth"))
-    assert rt.cfg.grip == "depth"
+    rt = Retargeter(
+        get_hand("allegro"), object_geometry("cube2"), RetargetConfig(grip=GripConfig(mode="depth"))
+    )
+    assert rt.cfg.grip.mode == "depth"
     from retarget.errors import RetargetError
 
-    with pytest.raises(RetargetError, match="grip"):
-        RetargetConfig(grip="hard").validate()
-    with pytest.raises(RetargetError, match="grip_force_n"):
-        RetargetConfig(grip_force_n=-1.0).validate()
+    with pytest.raises(RetargetError, match=r"GripConfig\.mode"):
+        RetargetConfig(grip=GripConfig(mode="hard"))
+    with pytest.raises(RetargetError, match=r"GripConfig\.force_n"):
+        RetargetConfig(grip=GripConfig(force_n=-1.0))
 
 
 def test_the_command_presses_from_the_surface_not_from_the_penetration(lifted_run):

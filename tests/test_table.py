@@ -167,7 +167,7 @@ def test_retargeting_keeps_clear_of_the_table_only_over_it():
     assert rt.table == DEFAULT_TABLE and DEFAULT_TABLE.over(tips).all()
     q_over = rt.retarget(traj).q
     assert _tip_z(rt, q_over).min() > DEFAULT_TABLE.top_z_m
-    assert _table_distance(rt, q_over) > rt.cfg.table_clearance - 1e-3
+    assert _table_distance(rt, q_over) > rt.cfg.collision.table_clearance - 1e-3
     # a Retargeter refuses a trajectory on another table than its own
     with pytest.raises(RetargetError, match=re.escape("table=dexcanvas_core.table.table_of")):
         rt.retarget(dataclasses.replace(traj, table=beside))

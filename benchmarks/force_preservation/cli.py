@@ -62,10 +62,10 @@ from benchmarks.force_preservation.tables import (
 from dexcanvas_core.sim.pipeline import SimConfig
 from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S
 from dexcanvas_core.taxonomy import GROUPS
+from retarget.config import RetargetConfig
 from retarget.hands import available_hands, get_hand
 from retarget.pipeline import HUMAN_REPLAY_SEED
 from retarget.refine import RefineConfig
-from retarget.retargeter import RetargetConfig
 
 
 def run_benchmark(cfg: BenchConfig, console=None) -> dict:

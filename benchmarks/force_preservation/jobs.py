@@ -35,6 +35,7 @@ from retarget.baselines import (
     KinematicMetrics,
     measure_trajectory,
 )
+from retarget.config import RetargetConfig
 from retarget.errors import RetargetError
 from retarget.hands import get_hand
 from retarget.metrics import force_metrics, refined_force_metrics
@@ -46,7 +47,7 @@ from retarget.pipeline import (
     refine_lost,
     retarget_demonstration,
 )
-from retarget.retargeter import RetargetConfig, Retargeter
+from retarget.retargeter import Retargeter
 from retarget.validate import Resimulator
 
 
@@ -151,9 +152,11 @@ def _hand_job(args) -> list[dict]:
             r.update(mass_kg=geom.mass_kg, weight_n=weight_n)
         resim_soft = Resimulator(hand, geom)
         configs = {
-            "b": RetargetConfig(**{**overrides, "use_contacts": False, "squeeze_depth": 0.0}),
-            "c": RetargetConfig(**overrides),
-            "d": RetargetConfig(**{**overrides, "force_matching": True}),
+            "b": RetargetConfig.from_overrides(
+                {**overrides, "use_contacts": False, "squeeze_depth": 0.0}
+            ),
+            "c": RetargetConfig.from_overrides(overrides),
+            "d": RetargetConfig.from_overrides({**overrides, "force_matching": True}),
         }
         for v in ("b", "c"):
             row = rows[v]

@@ -50,9 +50,10 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dexcanvas_core.keypoints import MANO21
+from retarget.config import RetargetConfig
 from retarget.errors import RetargetError
 from retarget.hands.base import WRIST_SITE, wrist_qpos_from_mano
-from retarget.retargeter import RetargetConfig, Retargeter
+from retarget.retargeter import Retargeter
 from retarget.urdf_export import export_urdf, mj_name
 
 log = logging.getLogger(__name__)
@@ -310,7 +311,9 @@ class DexRetargetingBaseline:
         ``geometry`` (the object's ``ObjectGeometry``) sets the scaling centre (the object's,
         as ours); without it keypoints scale about the wrist.
         """
-        rt = Retargeter(self.hand, geometry, RetargetConfig(use_collision=False))
+        rt = Retargeter(
+            self.hand, geometry, RetargetConfig.from_overrides({"collision.enabled": False})
+        )
         if rt.kp_sites != self.keypoint_sites:
             raise RetargetError("keypoint_sites differ from the retargeter's; pass them explicitly")
         tg = rt.human_targets(traj)

@@ -125,6 +125,6 @@ HAND = HandModel(
     # The middle distal joint rests on its extension limit (-0.227 rad) in the built-in
     # cube2/tripod's grasp and cannot press from there: the heavy cube of `retarget run --hand
     # allegro --pair cube2H/tripod --forces` dropped with the wrist offset (12.1 cm) and is
-    # held with this margin (1.06 cm; 0.1 rad: 2.42 cm). See RetargetConfig.joint_limit_margin.
+    # held with this margin (1.06 cm; 0.1 rad: 2.42 cm). See RetargetConfig.joint_limits.margin.
     joint_limit_margin=0.05,
 )

@@ -205,7 +205,7 @@ class WristOffset:
     (finger direction, thumb side, mount point), which fixes the frames but not the pose a grasp
     needs: a hand whose fingers curl differently from a human's (one motor per finger on Inspire
     and Ability) reaches the human's fingertips only with its wrist flexed and moved. The
-    retargeter (``RetargetConfig.use_wrist_offset``) aims the wrist at the human wrist pose
+    retargeter (``RetargetConfig.wrist.use_offset``) aims the wrist at the human wrist pose
     composed with this offset
     (``R* = R_h exp(rotvec)``, ``p* = p_h + R_h translation``). Measured, not designed:
     ``retarget calibrate-wrist --hand NAME`` (:mod:`retarget.calibration`) prints it.

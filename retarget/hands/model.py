@@ -87,14 +87,14 @@ class HandModel:
     """The wrist target's offset from the human wrist (:class:`WristOffset`); None: none."""
     joint_limit_margin: float = 0.0
     """How far [rad or m] the retargeting's kinematic solution keeps this hand's finger joints
-    inside their ranges unless ``RetargetConfig.joint_limit_margin`` says otherwise (for a hand
+    inside their ranges unless ``RetargetConfig.joint_limits.margin`` says otherwise (for a hand
     whose fingers press badly from a limit; see there)."""
     wrist_weight: float = 1.0
-    """Factor on the retargeting's wrist-pose weights (``RetargetConfig.w_wrist_pos`` and
-    ``w_wrist_rot``) for this hand; 0: the wrist is placed by the fingertips, the contacts and
-    the smoothness term alone. For a hand whose wrist the human wrist pose places badly even
-    with its calibrated offset (the Panda gripper has none: no one offset describes it;
-    ``retarget calibrate-wrist``)."""
+    """Factor on the retargeting's wrist-pose weights (``RetargetConfig.wrist``'s
+    ``position_weight`` and ``rotation_weight``) for this hand; 0: the wrist is placed by the
+    fingertips, the contacts and the smoothness term alone. For a hand whose wrist the human
+    wrist pose places badly even with its calibrated offset (the Panda gripper has none: no one
+    offset describes it; ``retarget calibrate-wrist``)."""
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:

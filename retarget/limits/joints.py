@@ -2,12 +2,45 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from retarget._checks import check_range
 from retarget.errors import RetargetError
 from retarget.limits._kernels import band_box, joint_box
 from retarget.limits.base import Limit
 from retarget.state import RobotState
+
+
+@dataclass(frozen=True, kw_only=True)
+class JointLimitsConfig:
+    """The joint range limit (``JointLimit``) of the kinematic solution."""
+
+    margin: float | None = None
+    """How far [rad or m] the kinematic solution keeps each finger joint inside its range (at
+    most a quarter of the range; 0: the whole range; None: the hand's own,
+    ``HandModel.joint_limit_margin``). The servo commands keep the whole range. Default None;
+    docs/method.md#joint-limits."""
+
+    def __post_init__(self):
+        check_range(self, "margin", optional=True)
+
+
+@dataclass(frozen=True, kw_only=True)
+class VelocityConfig:
+    """The velocity limits: per QP iterate (``VelocityLimit``) and the wrist's per frame
+    (``FrameSpeedLimit``)."""
+
+    max_joint_speed: float = 20.0
+    """Velocity bound [rad/s or m/s] per joint and QP iterate. Default 20."""
+    max_wrist_speed: float = 1.5
+    """Bound [m/s] per axis on the wrist's translation from one frame's solution to the next,
+    over all of the frame's iterations (``inf``: none). Default 1.5;
+    docs/method.md#wrist-speed."""
+
+    def __post_init__(self):
+        check_range(self, "max_wrist_speed", positive=True, finite=False, unit="m/s")
 
 
 class JointLimit(Limit):

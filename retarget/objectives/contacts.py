@@ -1,89 +1,82 @@
-"""Contact preservation: robot links touch the object where the human touched it."""
+"""Contact preservation: robot links touch the object where the human touched it (surface
+contacts, closing terms); their settings (``ContactsConfig``, ``ClosingConfig``)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
 
+import mujoco
 import numpy as np
 
+from retarget._checks import check_choice, check_range
 from retarget.errors import RetargetError
+from retarget.force_matching import tangent_basis
 from retarget.objectives._kernels import surface_gram, weighted_gram
 from retarget.objectives.base import Objective
+from retarget.objectives.link_distance import link_distance
 from retarget.state import RobotState
 
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+ContactSource = Literal["geometry", "records"]
 
 
-class ContactObjective(Objective):
-    """Active contacts: each robot contact site at its object-surface target point, and (with a
-    ``pad_axis``) its pad normal opposing the surface normal.
+@dataclass(frozen=True, kw_only=True)
+class ContactsConfig:
+    """The contact terms (``SurfaceContactObjective``): where the human touches the object, the
+    robot link goes to the same surface point. Chosen on the retargeting and force-preservation
+    benchmarks; docs/method.md#contacts."""
 
-    ``e = [p_site − p_surface]`` per active contact, plus ``R_site a + n_surface`` when the site's
-    pad axis ``a`` (site frame) is known. Sites without an active contact this frame contribute
-    nothing; ``set_contacts`` is called per frame with the human's contacts mapped to the robot.
-    """
+    enabled: bool = True
+    """Add the contact terms to the QP (the contacts are still measured). Default True."""
+    weight: float = 200.0
+    """Weight of a contact's error across the surface [per m²]. Default 200."""
+    tangent_weight: float = 0.01
+    """Factor on ``weight`` of a contact's error along the surface (1: isotropic; force matching
+    uses ``ForceMatchingConfig.tangent_weight``). Default 0.01."""
+    hover_m: float | None = 0.005
+    """Scale ``h`` [m] over which a contact's error across the surface turns from the link
+    point's offset along the human contact's normal to the link's signed distance to the
+    object (``SurfaceContactObjective.hover``); None: always the offset. Default 0.005."""
+    ramp_s: float = 0.0
+    """A contact's weight ramps up over its first and down over its last this many seconds
+    (0: off). Default 0."""
+    link_contacts: bool = True
+    """A finger touching with its distal pad, middle or proximal phalanx but not its tip
+    keypoint gets the contact on the corresponding robot link. Default True."""
+    link_threshold_m: float = 0.011
+    """Distance [m] from a human phalanx's bone axis to the surface below which that phalanx
+    touches (inferred contacts). Default 0.011."""
+    threshold_m: float = 0.012
+    """Human fingertip keypoint–surface distance [m] below which a fingertip touches (inferred
+    contacts). Default 0.012."""
+    source: ContactSource = "geometry"
+    """Which human phalanges touch: ``geometry`` (inferred from the captured keypoints and the
+    surface) or ``records`` (the force pipeline's contact records). Default ``geometry``."""
 
-    name = "contacts"
-    memo_weights = False  # its weights also depend on normal_weight and pad_axis
+    def __post_init__(self):
+        check_range(self, "weight")
+        check_range(self, "tangent_weight")
+        check_range(self, "hover_m", optional=True, unit="m")
+        check_range(self, "ramp_s", unit="s")
+        check_choice(self, "source", ContactSource)
 
-    def __init__(
-        self,
-        sites: Sequence[str],
-        weight: float = 1.0,
-        normal_weight: float = 0.05,
-        pad_axis: np.ndarray | None = None,
-    ):
-        super().__init__(weight)
-        self.sites = list(sites)
-        self.normal_weight = normal_weight
-        self.pad_axis = None if pad_axis is None else np.asarray(pad_axis, dtype=np.float64)
-        self.active = np.zeros(len(self.sites), bool)
-        self.points = np.zeros((len(self.sites), 3))
-        self.normals = np.zeros((len(self.sites), 3))
 
-    def set_contacts(
-        self, active: np.ndarray, points_world: np.ndarray, normals_world: np.ndarray
-    ) -> None:
-        a = np.asarray(active, bool)
-        p = np.asarray(points_world, dtype=np.float64)
-        n = np.asarray(normals_world, dtype=np.float64)
-        k = len(self.sites)
-        if a.shape != (k,) or p.shape != (k, 3) or n.shape != (k, 3):
-            raise RetargetError(
-                f"contacts: expected shapes ({k},), ({k}, 3), ({k}, 3); "
-                f"got {a.shape}, {p.shape}, {n.shape}"
-            )
-        if not (np.isfinite(p[a]).all() and np.isfinite(n[a]).all()):
-            raise RetargetError("contacts: active contact points or normals contain NaN")
-        self.active, self.points, self.normals = a, p, n
+@dataclass(frozen=True, kw_only=True)
+class ClosingConfig:
+    """The closing terms of ``SurfaceContactObjective`` (see there). docs/method.md#contacts."""
 
-    def _rows(self) -> list[int]:
-        return [i for i in range(len(self.sites)) if self.active[i]]
+    weight: float = 50.0
+    """Weight [per m²] of each closing term (0: only the contact's link). Default 50."""
+    slack_m: float = 0.004
+    """A closing link within this [m] of the object is left where it is. Default 0.004."""
+    ramp_s: float = 0.5
+    """A closing term's weight rises from 0 to ``weight`` over this long [s] after its human
+    phalanx began to touch. Default 0.5."""
 
-    def weights(self, m: int) -> np.ndarray:
-        per = [self.weight] * 3 + ([self.normal_weight] * 3 if self.pad_axis is not None else [])
-        return np.tile(np.asarray(per, dtype=np.float64), len(self._rows()))
-
-    def error(self, state: RobotState) -> np.ndarray:
-        out = []
-        for i in self._rows():
-            s = self.sites[i]
-            out.append(state.kin.site_position(s) - self.points[i])
-            if self.pad_axis is not None:
-                out.append(state.kin.site_rotation(s) @ self.pad_axis + self.normals[i])
-        return np.concatenate(out) if out else np.zeros(0)
-
-    def jacobian(self, state: RobotState) -> np.ndarray:
-        out = []
-        for i in self._rows():
-            J = state.kin.site_jacobian(self.sites[i])
-            out.append(J[:3])
-            if self.pad_axis is not None:
-                v = state.kin.site_rotation(self.sites[i]) @ self.pad_axis
-                out.append(-_skew(v) @ J[3:])  # d(R a)/dt = ω × (R a)
-        return np.concatenate(out, axis=0) if out else np.zeros((0, state.nv))
+    def __post_init__(self):
+        check_range(self, "weight")
+        check_range(self, "slack_m", unit="m")
+        check_range(self, "ramp_s", unit="s")
 
 
 class SurfaceContactObjective(Objective):
@@ -99,10 +92,8 @@ class SurfaceContactObjective(Objective):
     With the target's surface normal ``n`` (:meth:`set_contacts`' ``normals``) the error is
     split into its part across the surface, ``nᵀ(p_f − p_target)``, and its part along it
     (``tangent_weight``). The part across is zero wherever ``p_f`` lies in the target's
-    tangent plane, which a link can do far off a curved surface: a straight finger over an
-    apple, its nearest point level with the human's contact on the apple's side, is
-    "touching" by it (Inspire, generated sphere_4_finger on an 85 mm ball: index and ring 16
-    and 23 mm off the surface with their contacts satisfied). With ``hover`` = ``h`` [m], the
+    tangent plane, which a link can do far off a curved surface (a straight finger over an
+    apple, its nearest point level with the human's contact). With ``hover`` = ``h`` [m], the
     error across is ``o + φ(d − o)`` instead, ``o`` that offset, ``d`` the link's signed
     distance to the object (the two geoms' distance, negative when penetrating),
     ``φ(x) = x²/h`` for ``0 ≤ x < h``, ``x`` beyond and 0 below (once continuously
@@ -116,9 +107,8 @@ class SurfaceContactObjective(Objective):
     pulled to within ``closing_slack`` of the surface, ``e = d − closing_slack`` per link
     farther than that (``d`` its signed distance to the object), so that the finger wraps the
     object as the human's does instead of touching it with the contact's link alone. Links
-    already that near are left alone: pushing them onto the surface exactly turns a pinch's
-    thumb about its pad (Shadow on the built-in cube2/lateral_pinch, its proximal link 1 mm
-    into the cube: its pad went to the cube's other edge, 15 mm from the human's).
+    already that near are left alone (pushed onto the surface exactly, a pinch's thumb turns
+    about its pad).
 
     Args:
         model, data: the retargeting scene; ``data.qpos[:hand_nq]`` is synchronised with ``q``.
@@ -158,8 +148,6 @@ class SurfaceContactObjective(Objective):
         closing_slack: float = 0.0,
     ):
         super().__init__(weight)
-        import mujoco
-
         if not (np.isfinite(tangent_weight) and tangent_weight >= 0):
             raise RetargetError(f"contacts: tangent_weight must be >= 0, got {tangent_weight}")
         if not (np.isfinite(closing_weight) and closing_weight >= 0):
@@ -262,8 +250,6 @@ class SurfaceContactObjective(Objective):
         self._gap = normals is not None and self.hover is not None
         self._split = normals is not None and (self.tangent_weight != 1.0 or self._gap)
         if self._split:
-            from retarget.force_matching import tangent_basis
-
             n = np.asarray(normals, dtype=np.float64)
             if n.shape != (F, 3) or not np.isfinite(n[a]).all():
                 raise RetargetError(f"contacts: normals must be ({F}, 3), finite where active")
@@ -351,26 +337,8 @@ class SurfaceContactObjective(Objective):
 
     def _link_distance(self, d, geoms, reach: float, fallback: np.ndarray):
         """``(body, p, dist, g)`` of the link with collision ``geoms`` against the object in
-        ``d``: the body of its geom nearest the object, that geom's point nearest the object
-        [m], the signed distance [m] (``reach`` when farther) and the unit direction ``g`` in
-        which the distance grows when ``p`` moves (away from the object; ``fallback`` where
-        the two nearest points coincide)."""
-        mj, m = self._mj, self.model
-        fromto = np.zeros(6)
-        best, best_g = np.inf, -1
-        p = np.zeros(3)
-        q = np.zeros(3)
-        for g in geoms:
-            for o in self.object_geoms:
-                dist = mj.mj_geomDistance(m, d, g, o, reach, fromto)
-                if dist < best:
-                    best, best_g = dist, g
-                    p, q = fromto[:3].copy(), fromto[3:].copy()
-        v = p - q
-        norm = float(np.sqrt(v @ v))
-        gdir = v / (norm if best >= 0 else -norm) if norm > 1e-9 else np.asarray(fallback)
-        body = self._bodies[m.geom_bodyid[best_g]] if best_g >= 0 else ""
-        return body, p, best, gdir
+        ``d`` (:func:`link_distance`)."""
+        return link_distance(self.model, d, geoms, self.object_geoms, self._bodies, reach, fallback)
 
     def _closing_terms(self, q: np.ndarray):
         """This frame's closing terms at ``q`` (cached per ``q``): ``(fingers (k,), bodies,

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
+from retarget._checks import check_choice, check_range
 from retarget.errors import RetargetError
 from retarget.kinematics import PinocchioKinematics
 from retarget.objectives._kernels import site_gram
@@ -13,6 +16,48 @@ from retarget.objectives.base import Objective
 from retarget.state import RobotState
 
 _NO_ROWS = np.zeros(0, dtype=np.int64)  # site_gram's rows_b for absolute targets
+
+KeypointScaling = Literal["surface", "uniform"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class KeypointsConfig:
+    """The keypoint term (``KeypointObjective``) and how the human keypoints are scaled to the
+    robot hand's size (``Retargeter._scaled_keypoints``). Chosen on the retargeting benchmark;
+    docs/method.md#keypoints."""
+
+    tip_weight: float = 1.0
+    """Weight of a fingertip keypoint's error [per m²]. Default 1."""
+    joint_weight: float = 1.0
+    """Weight of another keypoint's error [per m²]. Default 1."""
+    scaling: KeypointScaling = "surface"
+    """``uniform``: about the object's centre by the hand scale; ``surface``: the same, but a
+    keypoint's distance to the object's surface is a robot-sized finger radius plus the human's
+    gap near the object (touching keypoints stay touching), scaled fully from
+    ``scale_blend_m`` out. Default ``surface``."""
+    finger_radius_m: float = 0.008
+    """``scaling="surface"``: the human finger's radius [m] about its keypoints (a keypoint
+    this close to the surface touches it). Default 0.008."""
+    scale_blend_m: float = 0.05
+    """``scaling="surface"``: gap [m] between a human finger and the object's surface from
+    which the gap gets the full hand scale. Default 0.05."""
+
+    def __post_init__(self):
+        check_range(self, "tip_weight")
+        check_range(self, "joint_weight")
+        check_choice(self, "scaling", KeypointScaling)
+        check_range(self, "scale_blend_m", positive=True, unit="m")
+
+
+@dataclass(frozen=True, kw_only=True)
+class VectorsConfig:
+    """The fingertip-to-thumb vector term (``VectorObjective``), which keeps pinches closed."""
+
+    weight: float = 1.0
+    """Weight [per m²]. Default 1; docs/method.md#keypoints."""
+
+    def __post_init__(self):
+        check_range(self, "weight")
 
 
 class KeypointObjective(Objective):

@@ -2,11 +2,36 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from retarget._checks import check_range
 from retarget.objectives._kernels import add_diagonal
 from retarget.objectives.base import Objective
 from retarget.state import RobotState
+
+
+@dataclass(frozen=True, kw_only=True)
+class PostureConfig:
+    """The posture term (``PostureObjective``): finger joints near the hand's default posture."""
+
+    weight: float = 1e-4
+    """Weight [per rad² or m²]. Default 1e-4; docs/method.md#posture."""
+
+    def __post_init__(self):
+        check_range(self, "weight")
+
+
+@dataclass(frozen=True, kw_only=True)
+class SmoothnessConfig:
+    """The smoothness term (``SmoothnessObjective``): near the previous frame's solution."""
+
+    weight: float = 0.05
+    """Weight [per rad² or m²]. Default 0.05; docs/method.md#smoothness."""
+
+    def __post_init__(self):
+        check_range(self, "weight")
 
 
 class PostureObjective(Objective):

@@ -2,13 +2,35 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from retarget._checks import check_range
 from retarget.errors import RetargetError
 from retarget.kinematics import PinocchioKinematics
 from retarget.objectives._kernels import pose_error, pose_gram
 from retarget.objectives.base import Objective
 from retarget.state import RobotState
+
+
+@dataclass(frozen=True, kw_only=True)
+class WristConfig:
+    """The wrist pose term (``WristPoseObjective``). Both weights are multiplied by the hand's
+    ``HandModel.wrist_weight``. Chosen on the retargeting benchmark; docs/method.md#wrist."""
+
+    position_weight: float = 0.15
+    """Weight of the wrist's position error [per m²]. Default 0.15."""
+    rotation_weight: float = 0.15
+    """Weight of the wrist's rotation error [per rad²]. Default 0.15."""
+    use_offset: bool = True
+    """Aim the wrist at the human wrist pose composed with the hand's calibrated
+    ``HandModel.wrist_offset`` (``retarget calibrate-wrist``) instead of the pose itself (a hand
+    without an offset: the pose itself). Default True."""
+
+    def __post_init__(self):
+        check_range(self, "position_weight")
+        check_range(self, "rotation_weight")
 
 
 class WristPoseObjective(Objective):

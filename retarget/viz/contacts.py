@@ -27,6 +27,7 @@ _FINGER_SEGMENTS = {
 @dataclass
 class ContactFrames:
     """Contact points of one hand, padded per frame (``N`` = most points in any frame)."""
+
     pos_world: np.ndarray
     """(T, N, 3) [m] contact points, world frame."""
     force_world: np.ndarray

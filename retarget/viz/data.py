@@ -55,6 +55,7 @@ _METRICS_KEYS = ("hand", "pair", "uuid", "dataset", "frames", "fps")
 @dataclass
 class RunFiles:
     """The contents of a run directory."""
+
     run_dir: Path
     metrics: dict
     arrays: dict[str, np.ndarray]
@@ -174,6 +175,7 @@ def load_human_for_run(run: RunFiles) -> Trajectory:
 @dataclass
 class SceneData:
     """Everything drawn, per data frame (world frame, z up, metres)."""
+
     hand_name: str
     object_id: str
     pair: str

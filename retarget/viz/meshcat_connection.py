@@ -28,6 +28,7 @@ from retarget.viz.meshcat_geoms import import_meshcat
 @dataclass(frozen=True)
 class MeshcatServer:
     """A running meshcat server (see :func:`meshcat_server`)."""
+
     zmq_url: str
     web_url: str
     pid: int

@@ -43,6 +43,7 @@ PLOTS_DIR = "plots"
 @dataclass(frozen=True)
 class ReportConfig:
     """One ``retarget report``."""
+
     run_dirs: tuple[Path, ...]
     """Run directories (``retarget run``); one or more."""
     out: Path | None = None
@@ -72,6 +73,7 @@ class ReportConfig:
 @dataclass
 class RunSection:
     """What the report shows of one run."""
+
     run_dir: Path
     metrics: dict
     notes: list[str] = field(default_factory=list)

@@ -22,6 +22,7 @@ from retarget.viz.contacts import ContactFrames, robot_body_parts
 
 class _RecordingResimulator(Resimulator):
     """The run's :class:`~retarget.validate.Resimulator`, keeping the data of its last step."""
+
     last_data: mujoco.MjData | None = None
 
     def _contact_forces(self, d):  # after every physics step: keep the data to read later
@@ -32,6 +33,7 @@ class _RecordingResimulator(Resimulator):
 @dataclass
 class RobotSimRecord:
     """What :func:`record_resimulation` recorded, per data frame."""
+
     result: object
     """The ``retarget.validation_result.ValidationResult`` (the run's metrics come from the
     same)."""

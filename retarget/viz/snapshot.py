@@ -56,6 +56,7 @@ MUJOCO_TIMEOUT_S = 300.0
 @dataclass(frozen=True)
 class SnapshotConfig:
     """One ``retarget snapshot``."""
+
     out: Path
     """Output directory (created). When retargeting, the run's own files go there too."""
     hand: str | None = None

@@ -94,6 +94,7 @@ class CameraView:
     ``azimuth`` [deg] turns about +z (0: looking along +x); ``elevation`` [deg] is negative
     when looking down. ``fovy`` [deg] is the vertical field of view.
     """
+
     lookat: tuple[float, float, float]
     distance: float
     azimuth: float

@@ -23,6 +23,7 @@ EXTENT_MARGIN_M = 0.03
 @dataclass(frozen=True)
 class SceneOptions:
     """What the scene shows and how."""
+
     layout: Literal["overlay", "side_by_side"] = "side_by_side"
     """``side_by_side``: the human demonstration (hand, its object, its contacts) beside the
     robot, to the camera's left; ``overlay``: drawn over the robot (a larger robot hand then
@@ -68,6 +69,7 @@ class SceneOptions:
 class Framing:
     """Camera for the whole trajectory, and per frame one fitted to that frame's content
     (same viewing direction)."""
+
     whole: style.CameraView
     human_offset: np.ndarray
     """(3,) [m] translation of the human group (``SceneOptions.human_offset``)."""
