@@ -49,7 +49,14 @@ __all__ = [
 @dataclass(frozen=True)
 class RetargetConfig:
     """Weights and switches of the per-frame QP, one config per term (each validated when
-    constructed)."""
+    constructed).
+
+    >>> cfg = RetargetConfig.from_overrides({"contacts.weight": 100.0, "w_posture": 1e-3})
+    >>> cfg.contacts.weight, cfg.posture.weight
+    (100.0, 0.001)
+    >>> cfg.flat()["w_contacts"]               # the flat names of metrics.json
+    100.0
+    """
 
     solver: SolverConfig = field(default_factory=SolverConfig)
     """The per-frame solve (backend, iterations, warm start, feasibility re-steps)."""

@@ -10,7 +10,15 @@ from collections.abc import Iterable
 
 
 class RetargetError(Exception):
-    """Base class of every error raised by ``retarget``."""
+    """Base class of every error raised by ``retarget``.
+
+    >>> from retarget import get_hand
+    >>> try:
+    ...     get_hand("shadwo")
+    ... except RetargetError as e:
+    ...     print(str(e).split(";")[0])
+    unknown hand 'shadwo'
+    """
 
 
 class UnknownHandError(RetargetError, KeyError):

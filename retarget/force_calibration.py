@@ -42,7 +42,11 @@ from retarget.force_scores import correlation_means, finger_force_profiles
 @dataclass(frozen=True)
 class ForceCalibrationConfig:
     iterations: int = 10
-    """Corrected iterates after the input commands' re-simulation (each costs one)."""
+    """Corrected iterates after the input commands' re-simulation (each costs one).
+
+    >>> ForceCalibrationConfig(iterations=4).validate().iterations
+    4
+    """
     gain: float = 0.5
     """Share ``g`` of each frame's force error corrected per iterate."""
     smooth_s: float = 0.075
@@ -297,7 +301,20 @@ def calibrate_forces(
     ``retargeter`` with ``force_matching.enabled``) in ``resimulator``'s scene (module doc).
 
     ``sim``: the input commands' re-simulation, when already run (it is iterate 0).
-    Returns the chosen iterate and every iterate's success and force error."""
+    Returns the chosen iterate and every iterate's success and force error.
+
+    >>> from dexcanvas_core import load_demonstration, object_geometry
+    >>> from retarget import Resimulator, Retargeter, RetargetConfig, ValidateConfig, get_hand
+    >>> from retarget.pipeline import human_forces
+    >>> human, _ = human_forces(load_demonstration("cube2/tripod").slice(230, 330), "cube2")
+    >>> hand, obj = get_hand("allegro"), object_geometry("cube2")
+    >>> rt = Retargeter(hand, obj, RetargetConfig.from_overrides({"force_matching": True}))
+    >>> robot = rt.retarget(human)
+    >>> resim = Resimulator(hand, obj, ValidateConfig(contact_timeconst=0.02))
+    >>> cal = calibrate_forces(rt, resim, robot, human, cfg=ForceCalibrationConfig(iterations=2))
+    >>> len(cal.iterates), cal.commands.shape == robot.q_command.shape
+    (3, True)
+    """
     cfg = (cfg or ForceCalibrationConfig()).validate()
     target = human_target(robot, retargeter.cfg.force_matching.scale)
     m, nq = resimulator.model, resimulator.hand_nq

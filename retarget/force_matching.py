@@ -36,7 +36,7 @@ class ForceMatchingConfig:
     distributed over the robot's contacts by the force QP (:func:`distribute`) and applied
     through the servo gains (:func:`squeeze_offsets`), in place of the grip. Needs a trajectory
     with contact records carrying forces. Chosen on the force-preservation benchmark;
-    docs/method.md#force-matching."""
+    docs/method.md#2-pressing-the-grip-and-force-matching."""
 
     enabled: bool = False
     """Replace the grip by force matching. Default False."""

@@ -26,7 +26,7 @@ GripMode = Literal["wrench", "depth"]
 class GripConfig:
     """How the position command (``q_command``) presses the object where the human touches it
     (force matching, ``ForceMatchingConfig``, replaces the grip). Chosen on the retargeting
-    benchmark; docs/method.md#grip."""
+    benchmark; docs/method.md#2-pressing-the-grip-and-force-matching."""
 
     mode: GripMode = "wrench"
     """``wrench``: contact forces from the object's weight and motion where the hand carries

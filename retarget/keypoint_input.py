@@ -93,7 +93,14 @@ def keypoints_to_trajectory(
 
 
 def retarget_keypoints(hand, keypoints: np.ndarray, fps: float, order: str = "mano21", config=None):
-    """Retarget a bare keypoint sequence onto ``hand`` (no object): a ``RobotTrajectory``."""
+    """Retarget a bare keypoint sequence onto ``hand`` (no object): a ``RobotTrajectory``.
+
+    >>> from dexcanvas_core import load_demonstration
+    >>> from retarget import get_hand
+    >>> keypoints = load_demonstration("cube2/tripod").hand.joint_pos[:10]  # (T, 21, 3) [m]
+    >>> retarget_keypoints(get_hand("leap"), keypoints, fps=120.0).q.shape
+    (10, 22)
+    """
     traj = keypoints_to_trajectory(keypoints, fps, order)
     return Retargeter(hand, None, config).retarget(traj)
 

@@ -90,7 +90,18 @@ def force_metrics(robot, sim, human, retargeter) -> dict:
     human never loaded has no profile to match (``None``): the robot pressing with it counts
     against ``contact_precision`` instead. ``*_load_bearing`` repeat the two correlation means
     over the loaded fingers carrying at least ``LOAD_BEARING_SHARE`` of the hand's force
-    (``load_share`` per finger: its mean human force over the sum of the mapped fingers')."""
+    (``load_share`` per finger: its mean human force over the sum of the mapped fingers').
+
+    >>> from dexcanvas_core import load_demonstration
+    >>> from retarget.config import RetargetConfig
+    >>> from retarget.pipeline import retarget_demonstration
+    >>> human = load_demonstration("cube2/tripod").slice(230, 330)
+    >>> forces = RetargetConfig.from_overrides({"force_matching": True})
+    >>> r = retarget_demonstration(human, "cube2/tripod", "allegro", forces, calibrate_iterations=0)
+    >>> m = force_metrics(r.robot, r.sim, r.trajectory, r.retargeter)
+    >>> sorted(m["force_per_finger"]), -1 <= m["force_profile_correlation_mean"] <= 1
+    (['index', 'middle', 'ring', 'thumb'], True)
+    """
     H = np.linalg.norm(robot.human_force, axis=2)  # (T, F) per human finger the robot maps
     # the robot finger each human finger drives (a gripper merges index and middle)
     col = [sim.fingers.index(retargeter.hand.fingers[f]) for f in retargeter.tip_human]
@@ -170,7 +181,16 @@ def run_metrics(result: PipelineResult, cfg: RunConfig) -> dict:
     """``metrics.json`` of a run: what ran (hand, pair, dataset, options), the re-simulation's
     object tracking (``ValidationResult.metrics``), the kinematic errors, and with force
     matching the force scores, the calibration, the human replay; with a refinement its
-    metrics (``refine``, ``success_refined``)."""
+    metrics (``refine``, ``success_refined``).
+
+    >>> from dexcanvas_core import load_demonstration
+    >>> from retarget.pipeline import RunConfig, retarget_demonstration
+    >>> human = load_demonstration("cube2/tripod").slice(0, 30)
+    >>> result = retarget_demonstration(human, "cube2/tripod", "shadow")
+    >>> m = run_metrics(result, RunConfig(hand="shadow", pair="cube2/tripod"))
+    >>> m["success"], m["frames"], m["retarget_config"]["w_contacts"]
+    (True, 30, 200.0)
+    """
     robot, sim, traj, rt = result.robot, result.sim, result.trajectory, result.retargeter
     pair = result.subject
     kin_pen = (

@@ -14,7 +14,19 @@ from retarget.pipeline import PipelineResult
 
 
 def write_run(out_dir: Path, result: PipelineResult, metrics: dict) -> None:
-    """Write ``result``'s trajectory and ``metrics`` into ``out_dir`` (which must exist)."""
+    """Write ``result``'s trajectory and ``metrics`` into ``out_dir`` (which must exist).
+
+    >>> import tempfile
+    >>> from dexcanvas_core import load_demonstration
+    >>> from retarget.metrics import run_metrics
+    >>> from retarget.pipeline import RunConfig, retarget_demonstration
+    >>> human = load_demonstration("cube2/tripod").slice(0, 30)
+    >>> result = retarget_demonstration(human, "cube2/tripod", "panda")
+    >>> out = Path(tempfile.mkdtemp())
+    >>> write_run(out, result, run_metrics(result, RunConfig(hand="panda", pair="cube2/tripod")))
+    >>> np.load(out / "robot_trajectory.npz")["q_command"].shape
+    (30, 8)
+    """
     _save(out_dir, result.robot, result.sim, result.refined, result.planned_commands)
     atomic_write_text(out_dir / "metrics.json", json.dumps(metrics, indent=2, sort_keys=True))
 

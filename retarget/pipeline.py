@@ -49,7 +49,15 @@ from retarget.validate import (
 
 @dataclass(frozen=True)
 class RunConfig:
-    """One retargeting run: what to load, onto which hand, which steps, where to write."""
+    """One retargeting run: what to load, onto which hand, which steps, where to write.
+
+    >>> over = {"w_contacts": 150}
+    >>> cfg = RunConfig(hand="shadow", pair="cube2/tripod", forces=True, overrides=over)
+    >>> cfg.output_dir()
+    PosixPath('runs/shadow_cube2_tripod_0')
+    >>> retarget_config(cfg).contacts.weight, retarget_config(cfg).force_matching.enabled
+    (150, True)
+    """
 
     hand: str
     """Registered hand name (``retarget hands``)."""
@@ -194,7 +202,14 @@ class HumanReplay:
 
 @dataclass
 class PipelineResult:
-    """What the pipeline computed for one demonstration and one hand, in memory."""
+    """What the pipeline computed for one demonstration and one hand, in memory.
+
+    >>> from dexcanvas_core import load_demonstration
+    >>> human = load_demonstration("cube2/tripod").slice(0, 30)
+    >>> result = retarget_demonstration(human, "cube2/tripod", "allegro")
+    >>> result.hand.name, result.success, result.calibration is None, result.refined is None
+    ('allegro', True, True, True)
+    """
 
     trajectory: Trajectory
     """The human demonstration as retargeted: time-scaled, and force-annotated when force
@@ -266,6 +281,14 @@ def retarget_demonstration(
     configuration (:func:`refine_config`), force-calibrated too when force matching;
     ``None``: no refinement. ``human_replay`` (force matching): the force pipeline again at
     ``HUMAN_REPLAY_SEED``. ``progress``: a :class:`Progress` showing each step's bar.
+
+    >>> from dexcanvas_core import load_demonstration
+    >>> human = load_demonstration("cube2/tripod").slice(230, 330)   # the grasp and the lift
+    >>> forces = RetargetConfig.from_overrides({"force_matching": True})
+    >>> result = retarget_demonstration(human, "cube2/tripod", "shadow", forces,
+    ...                                 calibrate_iterations=1)
+    >>> result.human_sim["success"], len(result.calibration.iterates)
+    (True, 2)
     """
     config = RetargetConfig() if config is None else config
     subject = parse_pair(subject) if isinstance(subject, str) else subject
@@ -384,6 +407,10 @@ def run_pipeline(cfg: RunConfig) -> PipelineResult:
     Raises:
         RetargetError: a bad option, an unknown hand or pair, a pair the hand cannot perform, a
             missing demonstration, or human forces the force pipeline could not produce.
+
+    >>> result = run_pipeline(RunConfig(hand="panda", pair="cube2/tripod", progress=False))
+    >>> result.robot.q_command.shape[1], result.trajectory.num_frames
+    (8, 736)
     """
     check_run(cfg)
     hand = get_hand(cfg.hand)

@@ -35,7 +35,11 @@ from retarget.refine_scene import finger_forces, human_fingers, tracking_env
 class RefineConfig:
     tracker: str = "mpc"
     """``mpc``, or ``open_loop`` (the retargeted commands replayed in the same scene: the
-    baseline the refinement is measured against)."""
+    baseline the refinement is measured against).
+
+    >>> RefineConfig(retries=2).retries
+    2
+    """
     mpc: MPCConfig = field(default_factory=MPCConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     scale_pos_m: float = 0.03
@@ -120,7 +124,18 @@ class RefineResult:
 
 
 def refine(hand, geometry, human, robot, tip_sites: list[str], cfg: RefineConfig | None = None):
-    """Refine ``robot`` (a ``RobotTrajectory`` of ``human``) by sampling MPC (module doc)."""
+    """Refine ``robot`` (a ``RobotTrajectory`` of ``human``) by sampling MPC (module doc).
+
+    >>> from dexcanvas_core import load_demonstration, object_geometry
+    >>> from retarget import Retargeter, get_hand
+    >>> human = load_demonstration("cube2/tripod").slice(0, 20)
+    >>> hand, obj = get_hand("shadow"), object_geometry("cube2")
+    >>> rt = Retargeter(hand, obj)
+    >>> robot = rt.retarget(human)
+    >>> replayed = refine(hand, obj, human, robot, rt.tip_sites, RefineConfig(tracker="open_loop"))
+    >>> replayed.success, replayed.ctrl.shape[0]
+    (True, 20)
+    """
     cfg = RefineConfig() if cfg is None else cfg
     if cfg.tracker not in ("mpc", "open_loop"):
         raise RetargetError(f"unknown refinement tracker {cfg.tracker!r}; use mpc or open_loop")

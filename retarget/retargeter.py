@@ -83,6 +83,13 @@ class Retargeter(HumanTargets, GripAssembly, FrameSolver):
         table: the table of the trajectories it will retarget (``table_of(trajectory)``;
             default the default table): the hand keeps ``collision.table_clearance`` above its
             top, and only there. :meth:`retarget` refuses a trajectory on another table.
+
+    >>> from dexcanvas_core import load_demonstration, object_geometry
+    >>> from retarget import get_hand
+    >>> human = load_demonstration("cube2/tripod").slice(0, 30)
+    >>> robot = Retargeter(get_hand("shadow"), object_geometry("cube2")).retarget(human)
+    >>> robot.q.shape, robot.q_command.shape   # (T, nq): floating wrist + hand joints
+    ((30, 30), (30, 30))
     """
 
     def __init__(

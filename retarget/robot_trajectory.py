@@ -12,7 +12,15 @@ import numpy as np
 
 @dataclass
 class RobotTrajectory:
-    """A retargeted trajectory and what the solver measured along it."""
+    """A retargeted trajectory and what the solver measured along it.
+
+    >>> from dexcanvas_core import load_demonstration
+    >>> from retarget import get_hand, retarget_keypoints
+    >>> human = load_demonstration("cube2/tripod").slice(0, 10)
+    >>> robot = retarget_keypoints(get_hand("leap"), human.hand.joint_pos, fps=120.0)
+    >>> robot.joint_names[:3], robot.keypoint_err.shape
+    (['wrist_x', 'wrist_y', 'wrist_z'], (10,))
+    """
 
     hand: str
     joint_names: list[str]

@@ -30,6 +30,12 @@ def run_retarget(cfg: RunConfig) -> dict:
     Raises:
         RetargetError: bad options, an unknown hand or pair, a missing demonstration, human
             forces the force pipeline could not produce.
+
+    >>> import os, tempfile
+    >>> out = tempfile.mkdtemp()
+    >>> m = run_retarget(RunConfig(hand="panda", pair="cube2/tripod", out=out, progress=False))
+    >>> m["hand"], m["pair"], sorted(os.listdir(out))
+    ('panda', 'cube2/tripod', ['metrics.json', 'robot_trajectory.npz'])
     """
     result = run_pipeline(cfg)
     out_dir = cfg.output_dir()

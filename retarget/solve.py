@@ -20,7 +20,7 @@ Backend = Literal["pinocchio", "mink"]
 
 @dataclass(frozen=True, kw_only=True)
 class SolverConfig:
-    """The per-frame QP solve. Chosen on the retargeting benchmark; docs/method.md#solver."""
+    """The per-frame QP solve (``docs/method.md#the-solver-loop``)."""
 
     backend: Backend = "pinocchio"
     """``pinocchio`` (our QP on Pinocchio kinematics) or ``mink`` (mink on MuJoCo). Default

@@ -25,7 +25,17 @@ from retarget.urdf_export import export_urdf
 
 
 class TorchHandFK:
-    """Forward kinematics of one hand for ``(B, nq)`` joint tensors (MuJoCo ``qpos`` order)."""
+    """Forward kinematics of one hand for ``(B, nq)`` joint tensors (MuJoCo ``qpos`` order).
+
+    >>> from retarget import get_hand
+    >>> fk = TorchHandFK(get_hand("shadow"))
+    >>> q = torch.zeros(4, fk.nq, requires_grad=True)       # (B, nq), MuJoCo qpos order
+    >>> p = fk.site_positions(q)                             # (B, S, 3)
+    >>> p.shape[0], p.shape[2]
+    (4, 3)
+    >>> p.sum().backward(); q.grad.shape                     # differentiable w.r.t. q
+    torch.Size([4, 30])
+    """
 
     def __init__(
         self, hand, device: str | torch.device = "cpu", dtype: torch.dtype = torch.float32

@@ -83,7 +83,11 @@ def servo_summary(m: dict) -> str | None:
 
 @dataclass(frozen=True)
 class ValidateConfig:
-    """Re-simulation settings."""
+    """Re-simulation settings.
+
+    >>> ValidateConfig(contact_timeconst=FORCE_CONTACT_TIMECONST).contact_timeconst
+    0.02
+    """
 
     success_threshold_m: float = 0.05
     """DexCanvas rule: a frame with object position error above this fails the rollout [m]."""
@@ -145,6 +149,15 @@ class Resimulator:
 
     ``table``: the table of the trajectories it will run (``dexcanvas_core.table.table_of``;
     default the default table); :meth:`run` refuses a trajectory on another table.
+
+    >>> from dexcanvas_core import load_demonstration, object_geometry
+    >>> from retarget import Retargeter, get_hand
+    >>> human = load_demonstration("cube2/tripod").slice(0, 30)
+    >>> hand, obj = get_hand("shadow"), object_geometry("cube2")
+    >>> robot = Retargeter(hand, obj).retarget(human)
+    >>> sim = Resimulator(hand, obj).run(robot.q_command, human)
+    >>> sim.success, sim.q_sim.shape
+    (True, (30, 30))
     """
 
     def __init__(

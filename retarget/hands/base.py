@@ -57,7 +57,7 @@ class ContactParams:
 
     ``friction`` (sliding, torsional [m], rolling [m]), ``solref``, ``solimp`` are MuJoCo's
     defaults (MuJoCo XML reference, ``geom``); condim 4 on fingertip geoms (torsional friction
-    for pinches) and 3 elsewhere as in ../shared/DESIGN.md.
+    for pinches) and 3 elsewhere as in docs/design.md (conventions).
     """
 
     friction: tuple[float, float, float] = (1.0, 0.005, 0.0001)

@@ -6,7 +6,7 @@
 names the collision geoms ``*_collision``. Everything else (Pinocchio model, QP objectives,
 re-simulation) is derived from the compiled ``mujoco.MjModel``.
 
-Physical conventions (``../shared/DESIGN.md``, "Physics conventions"): ``implicitfast``
+Physical conventions (``docs/design.md``, conventions): ``implicitfast``
 integrator, elliptic friction cones, ``impratio`` 10, timestep 2 ms, condim 4 on fingertip geoms
 and 3 elsewhere. The hand's weight is carried by gravity compensation (``gravcomp`` 1 on every hand
 body): the arm that would hold the hand is not modelled, and the fingers' position servos are not
@@ -25,7 +25,7 @@ from retarget.hands.base import WRIST_BODY, WRIST_JOINTS, WRIST_SITE, SitePlacem
 
 log = logging.getLogger(__name__)
 
-# --- simulation options (../shared/DESIGN.md "Physics conventions") ---
+# --- simulation options (docs/design.md, conventions) ---
 TIMESTEP = 0.002  # [s]; DESIGN: timestep <= 2.5 ms
 IMPRATIO = 10.0  # DESIGN: elliptic cones with impratio ~ 10
 

@@ -51,6 +51,14 @@ class HandModel:
     Instances are immutable descriptions; :meth:`build_spec` returns a fresh ``mujoco.MjSpec``
     each call and :meth:`compile` a cached ``mujoco.MjModel`` (treat it as read-only; build your
     own from :meth:`build_spec` to change it). Hand modules create one instance named ``HAND``.
+
+    >>> from retarget import get_hand
+    >>> hand = get_hand("allegro")
+    >>> hand.mapped_human_fingers              # the pinky is dropped
+    ('thumb', 'index', 'middle', 'ring')
+    >>> model = hand.compile()                 # mujoco.MjModel: floating wrist + hand
+    >>> model.nq, model.nu
+    (22, 22)
     """
 
     name: str

@@ -32,7 +32,14 @@ _lock = threading.Lock()
 
 
 def register(hand: HandModel, *, replace: bool = False) -> HandModel:
-    """Add ``hand`` under ``hand.name`` (lower case). Returns it, so it can decorate a factory."""
+    """Add ``hand`` under ``hand.name`` (lower case). Returns it, so it can decorate a factory.
+
+    >>> import dataclasses
+    >>> mine = register(dataclasses.replace(get_hand("leap"), name="my_leap"))
+    >>> get_hand("my_leap") is mine
+    True
+    >>> unregister("my_leap")
+    """
     if not isinstance(hand, HandModel):
         raise RetargetError(f"register() needs a HandModel, got {type(hand).__name__}")
     key = hand.name.lower()
@@ -74,7 +81,11 @@ def _load_builtin() -> None:
 
 
 def available_hands() -> list[str]:
-    """Registered hand names, sorted."""
+    """Registered hand names, sorted.
+
+    >>> available_hands()
+    ['ability', 'allegro', 'inspire', 'leap', 'panda', 'shadow', 'svh']
+    """
     _load_builtin()
     return sorted(_hands)
 
@@ -83,6 +94,10 @@ def get_hand(name: str) -> HandModel:
     """The hand registered as ``name`` (case-insensitive).
 
     Raises :class:`~retarget.errors.UnknownHandError` naming close matches and every hand.
+
+    >>> hand = get_hand("Shadow")
+    >>> hand.name, hand.fingers["index"]
+    ('shadow', 'ff')
     """
     _load_builtin()
     hand = _hands.get(str(name).strip().lower())

@@ -55,7 +55,7 @@ from retarget.state import RobotState
 @dataclass(frozen=True, kw_only=True)
 class CollisionConfig:
     """The hand–object non-penetration limit (:class:`CollisionLimit`), with the table's and
-    the non-contact links' clearances. docs/method.md#collision."""
+    the non-contact links' clearances. docs/method.md#limits."""
 
     enabled: bool = True
     """Add the non-penetration rows to the QP (the distances are still measured). Default

@@ -21,7 +21,7 @@ class JointLimitsConfig:
     """How far [rad or m] the kinematic solution keeps each finger joint inside its range (at
     most a quarter of the range; 0: the whole range; None: the hand's own,
     ``HandModel.joint_limit_margin``). The servo commands keep the whole range. Default None;
-    docs/method.md#joint-limits."""
+    docs/method.md#limits."""
 
     def __post_init__(self):
         check_range(self, "margin", optional=True)
@@ -37,7 +37,7 @@ class VelocityConfig:
     max_wrist_speed: float = 1.5
     """Bound [m/s] per axis on the wrist's translation from one frame's solution to the next,
     over all of the frame's iterations (``inf``: none). Default 1.5;
-    docs/method.md#wrist-speed."""
+    docs/method.md#limits."""
 
     def __post_init__(self):
         check_range(self, "max_wrist_speed", positive=True, finite=False, unit="m/s")

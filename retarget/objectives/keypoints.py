@@ -24,7 +24,7 @@ KeypointScaling = Literal["surface", "uniform"]
 class KeypointsConfig:
     """The keypoint term (``KeypointObjective``) and how the human keypoints are scaled to the
     robot hand's size (``Retargeter._scaled_keypoints``). Chosen on the retargeting benchmark;
-    docs/method.md#keypoints."""
+    docs/method.md#objectives."""
 
     tip_weight: float = 1.0
     """Weight of a fingertip keypoint's error [per m²]. Default 1."""
@@ -54,7 +54,7 @@ class VectorsConfig:
     """The fingertip-to-thumb vector term (``VectorObjective``), which keeps pinches closed."""
 
     weight: float = 1.0
-    """Weight [per m²]. Default 1; docs/method.md#keypoints."""
+    """Weight [per m²]. Default 1; docs/method.md#objectives."""
 
     def __post_init__(self):
         check_range(self, "weight")

@@ -17,7 +17,7 @@ class PostureConfig:
     """The posture term (``PostureObjective``): finger joints near the hand's default posture."""
 
     weight: float = 1e-4
-    """Weight [per rad² or m²]. Default 1e-4; docs/method.md#posture."""
+    """Weight [per rad² or m²]. Default 1e-4; docs/method.md#objectives."""
 
     def __post_init__(self):
         check_range(self, "weight")
@@ -28,7 +28,7 @@ class SmoothnessConfig:
     """The smoothness term (``SmoothnessObjective``): near the previous frame's solution."""
 
     weight: float = 0.05
-    """Weight [per rad² or m²]. Default 0.05; docs/method.md#smoothness."""
+    """Weight [per rad² or m²]. Default 0.05; docs/method.md#objectives."""
 
     def __post_init__(self):
         check_range(self, "weight")

@@ -17,7 +17,7 @@ from retarget.state import RobotState
 @dataclass(frozen=True, kw_only=True)
 class WristConfig:
     """The wrist pose term (``WristPoseObjective``). Both weights are multiplied by the hand's
-    ``HandModel.wrist_weight``. Chosen on the retargeting benchmark; docs/method.md#wrist."""
+    ``HandModel.wrist_weight``. Chosen on the retargeting benchmark; docs/method.md#objectives."""
 
     position_weight: float = 0.15
     """Weight of the wrist's position error [per m²]. Default 0.15."""

@@ -4,7 +4,7 @@ Chromium draws meshcat's WebGL pages through SwiftShader (no GPU, no display). E
 gets a fresh profile directory, no network (a dead proxy and a resolver that resolves nothing,
 so a page that tries to load a URL fails instead of waiting), and runs as a managed process
 (``_process``): it and everything it starts end when the call returns, also on error or
-timeout. The flags are the ones of ``../shared/DESIGN.md`` ("Facts about this environment").
+timeout. The flags are the ones of ``docs/design.md`` (the machine it was built on).
 """
 
 from __future__ import annotations
