@@ -181,7 +181,8 @@ def _hand_job(args) -> list[dict]:
         elif "d" in computed:
             t0 = time.perf_counter()
             try:
-                subject = Pair.parse(f"{base['object_id']}/{base['manipulation_type']}")
+                mtype = base["pair"].split("/", 1)[1]  # the object may be its heavy twin
+                subject = Pair.parse(f"{base['object_id']}/{mtype}")
                 res_d = retarget_demonstration(
                     human, subject, hand, configs["d"], calibrate_iterations=n_calibrate
                 )
