@@ -378,8 +378,8 @@ def _calibrated(rt, resim, robot, human, sim, m: dict, n: int) -> tuple[dict, ob
 
 def _hand_job(args) -> list[dict]:
     """Worker: variants (a)–(d) of one hand on one (pair, object); one row per variant."""
-    from dexcanvas_core.demos.geometry import object_geometry
-    from dexcanvas_core.sim.pipeline import GRAVITY
+    from dexcanvas_core.objects.geometry import object_geometry
+    from dexcanvas_core.sim.physics import GRAVITY
     from retarget.baselines import KinematicMetrics, measure_trajectory
     from retarget.hands import get_hand
     from retarget.retargeter import RetargetConfig, Retargeter

@@ -216,8 +216,8 @@ def demonstration_arrays(pair: str) -> dict:
     """The built-in demonstration of ``pair`` as ``mano-npz`` arrays (its object's shape as a
     mesh)."""
     from dexcanvas_core.capture.export import geometry_mesh, trajectory_to_arrays
-    from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.loaders.selection import load_demonstration
+    from dexcanvas_core.objects.geometry import object_geometry
 
     traj = load_demonstration(pair)
     return trajectory_to_arrays(traj, geometry_mesh(object_geometry(traj.object.name)))

@@ -159,7 +159,7 @@ def run_one(
 ) -> list[dict]:
     """Both methods on one hand × pair: three rows (ours on q_command and q, dex-retargeting);
     the solves timed ``timing_repeats`` times, alternating (``_timing``)."""
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
     from retarget.baselines import KinematicMetrics, measure_trajectory
     from retarget.retargeter import RetargetConfig, Retargeter
     from retarget.validate import Resimulator

@@ -90,7 +90,7 @@ def carry(speed: float, acc: float, rot_deg: float, rot_s: float) -> tuple:
 
 def run_one(hand, t: np.ndarray, wrist: np.ndarray, driver: str, repeats: int) -> dict:
     """One hand × trajectory × driver: the row's numbers (module docstring)."""
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
     from dexcanvas_core.trajectory import HandTrack, ObjectTrack, Trajectory
     from retarget.validate import Resimulator, ValidateConfig
     from retarget.wrist_drive import WristReference, frame_steps
@@ -140,7 +140,7 @@ def run_one(hand, t: np.ndarray, wrist: np.ndarray, driver: str, repeats: int) -
 def demo_rows(hands, pair: str, repeats: int, console) -> list[dict]:
     """The grasp ``pair``'s built-in demonstration, retargeted onto each hand and re-simulated
     by both drivers (module docstring)."""
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
     from dexcanvas_core.table import table_of
     from dexcanvas_core.taxonomy import Pair
     from retarget.retargeter import Retargeter

@@ -209,7 +209,7 @@ def calibrate_wrist(
     demonstrations' seed, only goes into the ``source`` note."""
     from scipy.spatial.transform import Rotation
 
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
     from retarget.retargeter import RetargetConfig, Retargeter
 
     cfg = RetargetConfig(

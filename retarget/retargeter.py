@@ -1132,8 +1132,7 @@ class Retargeter:
         over the ``grip_lead_s`` before lift-off: the grip must be there when the table stops
         helping)."""
         from dexcanvas_core.rotations import aa_to_quat_wxyz
-        from dexcanvas_core.sim.grip import carried_load
-        from dexcanvas_core.sim.pipeline import capture_acceleration
+        from dexcanvas_core.sim.physics import capture_acceleration, carried_load
 
         T, F = traj.num_frames, len(self.tip_sites)
         kp, tau_max = self._servo_gains()

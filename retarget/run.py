@@ -669,7 +669,7 @@ def run_retarget(cfg: RunConfig) -> dict:
     if cfg.pair is None:  # a row's own type, known only now
         check_pair(hand, pair.manipulation_type)
     traj = time_scaled(traj, cfg.time_scale)
-    from dexcanvas_core.demos.geometry import object_geometry, object_record
+    from dexcanvas_core.objects.geometry import object_geometry, object_record
     from retarget.retargeter import Retargeter
     from retarget.validate import Resimulator, ValidateConfig
 

@@ -9,7 +9,7 @@ The objects are the paper's (``dexcanvas_core.taxonomy``): small ones among them
 40, 30 and 20 mm, a 20 × 27 mm mini cylinder, a 10 mm rod — and a 150 × 150 × 20 mm plate.
 
 Hand capability bounds used below (estimates for an adult hand, stated once here; finger pads
-are ~15–19 mm thick, ``demos.hand``):
+are ~15–19 mm thick, ``mano.hand_model``):
 
 * pad-to-pad precision grasps span at most ~70 mm with two digits, ~90 mm with three or four and
   ~100 mm with five (maximum grip aperture in reach-to-grasp studies stays under ~110–120 mm;
@@ -45,7 +45,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 
-from dexcanvas_core.demos.geometry import object_geometry
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.taxonomy import MANIPULATION_TYPES, OBJECTS, Pair
 
 

@@ -52,7 +52,6 @@ from functools import lru_cache
 import numpy as np
 
 from dexcanvas_core.demos.checks import closure_margin, lift_grip_ratio
-from dexcanvas_core.demos.geometry import ObjectGeometry, object_geometry
 from dexcanvas_core.demos.grasp_problem import (
     CLOSURE_MAX,
     CONTACT_TOL_M,
@@ -67,7 +66,8 @@ from dexcanvas_core.demos.grasp_problem import (
     _palm_centre,
 )
 from dexcanvas_core.demos.grasp_specs import GRASP_SPECS, Approach, ContactSpec, GraspSpec
-from dexcanvas_core.demos.hand import (
+from dexcanvas_core.errors import ValidationError
+from dexcanvas_core.mano.hand_model import (
     DOF_HIGH,
     DOF_LOW,
     N_DOF,
@@ -75,7 +75,7 @@ from dexcanvas_core.demos.hand import (
     dof_index,
     rodrigues,
 )
-from dexcanvas_core.errors import ValidationError
+from dexcanvas_core.objects.geometry import ObjectGeometry, object_geometry
 
 log = logging.getLogger(__name__)
 
@@ -376,6 +376,6 @@ def _make_grasp(
 @lru_cache(maxsize=512)
 def cached_grasp(object_id: str, type_name: str, scale: float, seed: int) -> Grasp:
     """``solve_grasp`` memoised per (object, type, hand scale, seed)."""
-    from dexcanvas_core.demos.hand import hand_model
+    from dexcanvas_core.mano.hand_model import hand_model
 
     return solve_grasp(object_id, type_name, hand_model(scale), seed=seed)

@@ -3,7 +3,8 @@
 The table is a box of finite extent (:class:`dexcanvas_core.table.Table`; the trajectory's own,
 else the default), not an infinite plane.
 
-Objects are built from their primitive composition (``dexcanvas_core.demos.object_geometry``):
+Objects are built from their primitive composition
+(``dexcanvas_core.objects.geometry.object_geometry``):
 primitives exactly, YCB items as the documented primitive compositions of that module, one
 geom per primitive with the catalogue mass spread over them by volume. The robot side
 (``retarget.scene``) builds its scenes with the same :func:`add_object` and :func:`add_table`.

@@ -167,7 +167,7 @@ def infer_contacts(traj: Trajectory, geometry, tol_m: float = INFER_TOLERANCE_M)
     object's. The contact point is the object-surface point nearest the capsule's closest axis
     sample; there is no force (zero vectors).
     """
-    from dexcanvas_core.demos.hand import CAPSULES, SAMPLE_SPACING
+    from dexcanvas_core.mano.hand_model import CAPSULES, SAMPLE_SPACING
     from dexcanvas_core.rotations import aa_to_matrix
 
     kp = np.asarray(traj.hand.joint_pos, dtype=np.float64)  # (T, 21, 3)
@@ -533,7 +533,7 @@ def scene_data(
 ) -> SceneData:
     """Combine a run, its human demonstration and (for ``robot_source='sim'``) a recorded
     re-simulation (made here when ``sim`` is None) into what the renderers draw."""
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
 
     if robot_source not in ("sim", "kinematic"):
         raise VizError(f"robot_source must be 'sim' or 'kinematic', got {robot_source!r}")

@@ -388,7 +388,7 @@ class MeshcatScene:
         return self.root["robot"][self.model.body(b).name or f"body{b}"]
 
     def _build_object(self) -> None:
-        from dexcanvas_core.demos.geometry import object_geometry
+        from dexcanvas_core.objects.geometry import object_geometry
 
         geom = object_geometry(self.data.object_id)
         targets = [(self.root["object"], style.OBJECT_RGBA)]

@@ -40,7 +40,7 @@ def build_model(hand, object_id: str, data, framing, options):
     """The scene as an ``MjModel``: drawn hand geoms, the two objects (mocap), table, sky."""
     import mujoco
 
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
     from dexcanvas_core.rotations import aa_to_quat_wxyz
     from retarget.viz import style
     from retarget.viz.meshcat_scene import drawn_geoms

@@ -75,7 +75,7 @@ class RunSection:
 
 
 def _section(run_dir: Path, cfg: ReportConfig) -> RunSection:
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
     from retarget.hands import get_hand
     from retarget.viz.data import (
         human_contacts,

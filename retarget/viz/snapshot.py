@@ -282,7 +282,7 @@ def _prepare(cfg: SnapshotConfig) -> tuple[RunFiles, object, list[int]]:
 def run_snapshot(cfg: SnapshotConfig) -> dict:
     """Write the stills, ``scene.html`` and ``snapshots.json`` (module docstring); return the
     manifest."""
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
     from retarget.hands import get_hand
 
     cfg = cfg.validate()

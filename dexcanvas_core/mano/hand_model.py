@@ -1,4 +1,5 @@
-"""The hand for demonstrations: fast batched kinematics and a capsule collision model.
+"""The MANO hand as the demonstration generator and the force pipeline use it: fast batched
+kinematics and a capsule collision model.
 
 Kinematics are those of :class:`~dexcanvas_core.mano.ManoLayer` on the skeleton path (same tree,
 same axis-angle semantics, tested against it), re-implemented in batched numpy because the grasp

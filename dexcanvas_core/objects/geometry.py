@@ -40,11 +40,11 @@ from pathlib import Path
 
 import numpy as np
 
-from dexcanvas_core.demos.primitives import Primitive, sdf_local
-from dexcanvas_core.demos.ycb_shapes import YCB_BUILDERS
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.objects.mesh import ObjectMesh, load_object_mesh, mesh_collision
+from dexcanvas_core.objects.primitives import Primitive, sdf_local
 from dexcanvas_core.objects.sdf import SdfGrid
+from dexcanvas_core.objects.ycb_shapes import YCB_BUILDERS
 from dexcanvas_core.rotations import aa_to_matrix
 from dexcanvas_core.taxonomy import ObjectSpec, object_spec
 

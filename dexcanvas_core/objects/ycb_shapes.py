@@ -12,7 +12,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from dexcanvas_core.demos.primitives import Primitive
+from dexcanvas_core.objects.primitives import Primitive
 from dexcanvas_core.rotations import aa_to_matrix, matrix_to_aa
 
 _Y90 = (0.0, math.pi / 2, 0.0)  # turns a primitive's z axis onto the object's x axis

@@ -1,6 +1,6 @@
 """Solid primitives posed in an object frame, with their exact signed distances.
 
-Sizes follow MuJoCo's conventions (half sizes, see ``dexcanvas_core.demos.geometry``); a
+Sizes follow MuJoCo's conventions (half sizes, see ``dexcanvas_core.objects.geometry``); a
 ``"mesh"`` primitive is a convex part of a mesh object (``dexcanvas_core.objects.mesh``).
 """
 
