@@ -41,7 +41,6 @@ def builtin_dataset_name() -> str:
     """File name of the cached built-in dataset: changes with the generator's version and with
     the models given to catalogue objects (``--objects``, ``--objects-dir``), since the
     demonstrations are generated on the shapes in use."""
-
     given = [s for s in custom_objects().values() if s.id in OBJECTS]
     return f"builtin-demos-v{DEMOS_VERSION}{_shapes_suffix(given)}.lance"
 
@@ -103,7 +102,6 @@ def default_dataset_path(progress: bool | None = None, workers: int | None = Non
 
 def builtin_pair_path(pair) -> Path:
     """Where one pair's built-in demonstration is cached (``"cube2/tripod"`` or a ``Pair``)."""
-
     p = pair if isinstance(pair, Pair) else Pair.parse(pair)
     folder = cache_dir() / f"builtin-demos-v{DEMOS_VERSION}-pairs"
     shape = _shapes_suffix([p.object] if p.object.mesh else [])
@@ -134,7 +132,6 @@ def builtin_demonstration_path(pair, progress: bool | None = None) -> Path:
             plausibility checks (the whole set leaves it out too); the message says which and
             how to proceed.
     """
-
     cached = builtin_demonstration_cached(pair)
     if cached is not None:
         return cached

@@ -73,6 +73,7 @@ from dexcanvas_core.mano.hand_model import (
     N_DOF,
     HandModel,
     dof_index,
+    hand_model,
     rodrigues,
 )
 from dexcanvas_core.objects.geometry import ObjectGeometry, object_geometry
@@ -376,6 +377,4 @@ def _make_grasp(
 @lru_cache(maxsize=512)
 def cached_grasp(object_id: str, type_name: str, scale: float, seed: int) -> Grasp:
     """``solve_grasp`` memoised per (object, type, hand scale, seed)."""
-    from dexcanvas_core.mano.hand_model import hand_model
-
     return solve_grasp(object_id, type_name, hand_model(scale), seed=seed)

@@ -26,6 +26,7 @@ from dexcanvas_core.io.schema import (
     SCHEMA_VERSION_KEY,
     SUPPORTED_MAJOR,
 )
+from dexcanvas_core.taxonomy import manipulation_type
 from dexcanvas_core.trajectory import (
     Trajectory,
 )
@@ -228,8 +229,6 @@ class LanceTrajectories:
 
 def _gesture_name(g: Any) -> str:
     """Manipulation type name for a stored gesture value, or the value itself if unknown."""
-    from dexcanvas_core.taxonomy import manipulation_type
-
     try:
         return manipulation_type(g).name
     except DexCanvasError:  # a code the catalogue leaves open: reported as stored

@@ -31,9 +31,11 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from dexcanvas_core.builtin import default_dataset_path
 from dexcanvas_core.errors import DexCanvasError, ValidationError
 from dexcanvas_core.io import LanceTrajectories, open_dataset
 from dexcanvas_core.loaders.selection import FilterValues, Selection, select_rows
+from dexcanvas_core.taxonomy import manipulation_type
 from dexcanvas_core.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -49,8 +51,6 @@ OPTIONAL_KEYS: tuple[str, ...] = ("joint_pos", "contact_force", "object_wrench")
 
 
 def _manipulation_name(gesture: str) -> str:
-    from dexcanvas_core.taxonomy import manipulation_type
-
     try:
         return manipulation_type(gesture).name
     except DexCanvasError:  # a code the catalogue leaves open: as stored
@@ -91,8 +91,6 @@ def trajectory_to_sample(traj: Trajectory) -> dict[str, Any]:
 
 
 def _default_path() -> str:
-    from dexcanvas_core.builtin import default_dataset_path
-
     return str(default_dataset_path())
 
 

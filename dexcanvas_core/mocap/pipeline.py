@@ -54,6 +54,7 @@ import pyarrow as pa
 import torch
 
 from dexcanvas_core.errors import DexCanvasError, ValidationError
+from dexcanvas_core.io import write_dataset
 from dexcanvas_core.mano.skeleton import BETA0_SCALE_PER_UNIT
 from dexcanvas_core.mocap.calibrate import (
     CALIBRATION_MODES,
@@ -72,10 +73,12 @@ from dexcanvas_core.mocap.layout import (
     OBJECT_MARKER_NAMES,
     object_marker_positions,
 )
+from dexcanvas_core.mocap.readers import read_markers
 from dexcanvas_core.mocap.rigid import kabsch, register_object
 from dexcanvas_core.mocap.sequence import fit_sequence, interpolate_params, root_from_markers
 from dexcanvas_core.mocap.stream import MarkerStream
-from dexcanvas_core.rotations import matrix_to_aa, slerp_aa
+from dexcanvas_core.rotations import matrix_to_aa, rotation_angle_between_aa, slerp_aa
+from dexcanvas_core.taxonomy import object_spec
 from dexcanvas_core.trajectory import HandTrack, ObjectMove, ObjectTrack, Trajectory
 
 log = logging.getLogger(__name__)
@@ -714,8 +717,6 @@ def fit_markers(
             "(e.g. 'cube2') or set \"object\" in the mapping file"
         )
     if obj_id is not None:
-        from dexcanvas_core.taxonomy import object_spec
-
         obj_id = object_spec(obj_id).id
         if not stream.has_object_markers:
             raise MarkerDataError(
@@ -835,8 +836,6 @@ def _object_moves(
     """The ``object_move`` segment: from the first to the last frame in which the object is
     displaced from its initial pose by more than ``move_threshold_mm`` or ``move_threshold_deg``
     (no segment if it never is)."""
-    from dexcanvas_core.rotations import rotation_angle_between_aa
-
     d = np.linalg.norm(pos - pos[0], axis=-1) * 1000
     a = np.rad2deg(rotation_angle_between_aa(rot_aa, np.tile(rot_aa[0], (len(rot_aa), 1))))
     moving = np.flatnonzero((d > opts.move_threshold_mm) | (a > opts.move_threshold_deg))
@@ -940,9 +939,6 @@ class FitReport:
 
 def run_fit(cfg: FitConfig) -> FitReport:
     """Read a marker file, fit it and write a one-row Trajectory dataset with the flags."""
-    from dexcanvas_core.io import write_dataset
-    from dexcanvas_core.mocap.readers import read_markers
-
     cfg.validate()
     stream = read_markers(
         cfg.markers,

@@ -24,6 +24,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dexcanvas_core.errors import ValidationError
+from dexcanvas_core.keypoints import FINGERS
 from dexcanvas_core.mano.skeleton import HandSkeleton
 from dexcanvas_core.rotations import aa_to_quat_wxyz
 from dexcanvas_core.sim.hand import SimHand, add_hand
@@ -296,7 +297,6 @@ def build_scene(
     add_object(spec, geometry, mocap=False, friction=tuple(fr), mass_kg=mass_kg)
     add_object_hold(spec)
     # fingertip positions in the object frame (the tracker's contact-keeping reward)
-    from dexcanvas_core.keypoints import FINGERS
 
     for f in FINGERS:
         spec.add_sensor(
