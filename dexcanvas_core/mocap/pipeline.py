@@ -32,9 +32,9 @@ The output trajectory has one ``object_move`` segment: the frames in which the o
 displaced from its initial pose (``move_threshold_mm`` / ``move_threshold_deg``).
 
 Per-frame quality flags (:class:`~.results.FitFlags`) travel with the result and are stored in
-the written dataset as one extra column ``fit_quality`` (a struct of per-frame lists); the calibration and
-the settings go to the column ``mocap_fit``. Nothing is dropped: the output has one frame per
-input frame, and every frame whose values are not a direct fit says so.
+the written dataset as one extra column ``fit_quality`` (a struct of per-frame lists); the
+calibration and the settings go to the column ``mocap_fit``. Nothing is dropped: the output has
+one frame per input frame, and every frame whose values are not a direct fit says so.
 """
 
 from __future__ import annotations
