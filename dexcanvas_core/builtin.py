@@ -101,7 +101,12 @@ def default_dataset_path(progress: bool | None = None, workers: int | None = Non
 
 
 def builtin_pair_path(pair) -> Path:
-    """Where one pair's built-in demonstration is cached (``"cube2/tripod"`` or a ``Pair``)."""
+    """Where one pair's built-in demonstration is cached (``"cube2/tripod"`` or a ``Pair``).
+
+    >>> from dexcanvas_core import builtin_pair_path
+    >>> builtin_pair_path("cube2/tripod").name
+    'cube2.tripod.lance'
+    """
     p = pair if isinstance(pair, Pair) else Pair.parse(pair)
     folder = cache_dir() / f"builtin-demos-v{DEMOS_VERSION}-pairs"
     shape = _shapes_suffix([p.object] if p.object.mesh else [])
@@ -131,6 +136,10 @@ def builtin_demonstration_path(pair, progress: bool | None = None) -> Path:
         DatasetError: the pair is not in the built-in set, or its demonstration fails the
             plausibility checks (the whole set leaves it out too); the message says which and
             how to proceed.
+
+    >>> from dexcanvas_core import builtin_demonstration_path, open_dataset
+    >>> len(open_dataset(builtin_demonstration_path("cube2/tripod")))
+    1
     """
     cached = builtin_demonstration_cached(pair)
     if cached is not None:

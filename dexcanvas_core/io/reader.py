@@ -253,6 +253,11 @@ def open_dataset(path: str | os.PathLike) -> LanceTrajectories:
         DatasetError: the path is missing, is not a Lance dataset, cannot be opened (corrupt or
             partially written), misses a required column, or names an unsupported contract major
             version.
+
+    >>> from dexcanvas_core import builtin_demonstration_path, open_dataset
+    >>> ds = open_dataset(builtin_demonstration_path("cube2/tripod"))
+    >>> len(ds), ds.get(0).scene
+    (1, 'cube2')
     """
     p = Path(path).expanduser()
     name = str(p)

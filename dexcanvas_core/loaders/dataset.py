@@ -120,6 +120,13 @@ class DexCanvasDataset(Dataset):
             message suggests close names).
         DatasetError: the path is not a readable dataset, or nothing matches the filters (the
             message lists the objects, types and operators the dataset contains).
+
+    One built-in demonstration (``DexCanvasDataset()`` reads the whole built-in set):
+
+    >>> from dexcanvas_core import DexCanvasDataset, builtin_demonstration_path
+    >>> ds = DexCanvasDataset(builtin_demonstration_path("cube2/tripod"))
+    >>> len(ds), tuple(ds[0]["finger_pose"].shape)
+    (1, (736, 45))
     """
 
     def __init__(

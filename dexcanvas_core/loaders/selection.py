@@ -243,7 +243,13 @@ def load_demonstration(pair, index: int = 0, dataset=None):
     """The ``index``-th demonstration (0-based) of ``pair`` (``"cube2/tripod"`` or a ``Pair``)
     in ``dataset`` (a DexCanvas-layout Lance path; ``None``: the built-in demonstration of
     ``pair``, built alone on first use when the whole built-in set is not built,
-    ``builtin.builtin_demonstration_path``)."""
+    ``builtin.builtin_demonstration_path``).
+
+    >>> from dexcanvas_core import load_demonstration
+    >>> traj = load_demonstration("cube2/tripod")
+    >>> traj.scene, traj.gesture, traj.fps
+    ('cube2', 'tripod', 120.0)
+    """
     if dataset is None:
         pair = pair if isinstance(pair, Pair) else Pair.parse(pair)
         dataset = builtin_demonstration_path(pair)

@@ -71,6 +71,14 @@ class ObjectGeometry:
             uniform density.
         approximate: the shape stands in for a real object (a built-in composition of a
             YCB-style item, not its model).
+
+    Signed distances [m] of points given in the object frame (negative inside):
+
+    >>> import numpy as np
+    >>> from dexcanvas_core import object_geometry
+    >>> cube = object_geometry("cube2")  # a 5 cm cube centred on its frame's origin
+    >>> cube.signed_distance(np.array([[0.0, 0.0, 0.1], [0.0, 0.0, 0.0]])).round(3).tolist()
+    [0.075, -0.025]
     """
 
     object_id: str
@@ -389,5 +397,10 @@ def object_geometry(object_id: str | ObjectSpec) -> ObjectGeometry:
     Raises:
         UnknownNameError: unknown object (the message lists close matches).
         ValidationError: the object's mesh cannot be used (unreadable, open, absurd scale).
+
+    >>> from dexcanvas_core import object_geometry
+    >>> geom = object_geometry("Cube 2")
+    >>> geom.object_id, geom.mass_kg, [p.type for p in geom.primitives]
+    ('cube2', 0.037, ['box'])
     """
     return _build(object_spec(object_id))

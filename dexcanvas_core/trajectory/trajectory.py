@@ -37,7 +37,15 @@ from dexcanvas_core.trajectory.tracks import HandTrack, ObjectMove, ObjectTrack
 
 @dataclass
 class Trajectory:
-    """One demonstration. See the module docstring for frames and units."""
+    """One demonstration. See the module docstring for frames and units.
+
+    >>> from dexcanvas_core import load_demonstration
+    >>> traj = load_demonstration("cube2/tripod")
+    >>> traj.num_frames, traj.hand.joint_pos.shape, traj.object.pos.shape
+    (736, (736, 21, 3), (736, 3))
+    >>> traj.slice(0, 120).num_frames, traj.resample(60.0).fps
+    (120, 60.0)
+    """
 
     uuid: str
     timestamp: np.ndarray
