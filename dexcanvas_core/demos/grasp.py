@@ -1,10 +1,10 @@
 """Grasp synthesis: a small optimisation on the hand skeleton, per manipulation type.
 
 For one (object, manipulation type, operator) the optimiser finds the wrist pose relative to the
-object and the 22 driven finger angles (:mod:`.hand`) such that the type's **contact parts**
-touch the object's surface and the hand does not penetrate the object or the table. It is a
-bounded nonlinear least-squares problem (Levenberg–Marquardt, :mod:`.optimize`; joint limits
-as bounds with a 2° margin; Jacobian by batched forward differences).
+object and the 22 driven finger angles (:mod:`dexcanvas_core.mano.hand_model`) such that the
+type's **contact parts** touch the object's surface and the hand does not penetrate the object or
+the table. It is a bounded nonlinear least-squares problem (Levenberg–Marquardt,
+:mod:`.optimize`; joint limits as bounds with a 2° margin; Jacobian by batched forward differences).
 
 Residuals (distances in metres, weights in ``GraspWeights``):
 
