@@ -42,7 +42,7 @@ import numpy as np
 
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.objects.mesh import ObjectMesh, load_object_mesh, mesh_collision
-from dexcanvas_core.objects.primitives import Primitive, sdf_local
+from dexcanvas_core.objects.primitives import Y90, Primitive, sdf_local
 from dexcanvas_core.objects.sdf import SdfGrid
 from dexcanvas_core.objects.ycb_shapes import YCB_BUILDERS
 from dexcanvas_core.rotations import aa_to_matrix
@@ -283,9 +283,6 @@ def _centred(prims: list[Primitive]) -> tuple[tuple[Primitive, ...], float]:
     return out, float(0.5 * (hi - lo)[2])
 
 
-_Y90 = (0.0, math.pi / 2, 0.0)  # turns a primitive's z axis onto the object's x axis
-
-
 def _primitive_composition(spec: ObjectSpec) -> tuple[list[Primitive], str]:
     """A primitive object as one MuJoCo-style primitive in the object frame (z up as the first
     placement rests it; a lying cylinder's axis along x), and its description."""
@@ -303,7 +300,7 @@ def _primitive_composition(spec: ObjectSpec) -> tuple[list[Primitive], str]:
     d, h = s
     if spec.lying:
         return (
-            [Primitive("cylinder", (d / 2, h / 2), rot_aa=_Y90, name="cylinder")],
+            [Primitive("cylinder", (d / 2, h / 2), rot_aa=Y90, name="cylinder")],
             f"cylinder Ø {d * 1e3:.0f} × {h * 1e3:.0f} mm lying on its side, axis along x",
         )
     return (

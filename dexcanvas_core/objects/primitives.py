@@ -21,6 +21,10 @@ PRIMITIVE_TYPES: tuple[str, ...] = ("box", "cylinder", "sphere", "capsule", "mes
 _SIZE_LEN = {"box": 3, "cylinder": 2, "sphere": 1, "capsule": 2, "mesh": 3}
 _EPS = 1e-12
 
+Y90: tuple[float, float, float] = (0.0, math.pi / 2, 0.0)
+"""Axis-angle [rad] of a quarter turn about y: turns a primitive's z axis onto the object's x axis
+(a lying cylinder or capsule)."""
+
 
 @dataclass(frozen=True)
 class Primitive:
