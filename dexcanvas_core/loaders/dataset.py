@@ -31,7 +31,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from dexcanvas_core.builtin import default_dataset_path
+from dexcanvas_core import builtin
 from dexcanvas_core.errors import DexCanvasError, ValidationError
 from dexcanvas_core.io import LanceTrajectories, open_dataset
 from dexcanvas_core.loaders.selection import FilterValues, Selection, select_rows
@@ -91,7 +91,7 @@ def trajectory_to_sample(traj: Trajectory) -> dict[str, Any]:
 
 
 def _default_path() -> str:
-    return str(default_dataset_path())
+    return str(builtin.default_dataset_path())  # looked up at call time (tests replace it)
 
 
 class DexCanvasDataset(Dataset):
