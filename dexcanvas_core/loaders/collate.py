@@ -97,7 +97,8 @@ def make_dataloader(
     go to ``DataLoader`` as they are.
 
     >>> from dexcanvas_core import DexCanvasDataset, builtin_demonstration_path, make_dataloader
-    >>> ds = DexCanvasDataset(builtin_demonstration_path("cube2/tripod"))
+    >>> path = builtin_demonstration_path("cube2/tripod")
+    >>> ds = DexCanvasDataset(path, objects=["cube2"], manipulation_types=["tripod"])
     >>> batch = next(iter(make_dataloader(ds, batch_size=1)))
     >>> tuple(batch["finger_pose"].shape), tuple(batch["attention_mask"].shape)
     ((1, 736, 45), (1, 736))

@@ -124,7 +124,8 @@ class DexCanvasDataset(Dataset):
     One built-in demonstration (``DexCanvasDataset()`` reads the whole built-in set):
 
     >>> from dexcanvas_core import DexCanvasDataset, builtin_demonstration_path
-    >>> ds = DexCanvasDataset(builtin_demonstration_path("cube2/tripod"))
+    >>> path = builtin_demonstration_path("cube2/tripod")  # the pair's, or the whole set if built
+    >>> ds = DexCanvasDataset(path, objects=["cube2"], manipulation_types=["tripod"])
     >>> len(ds), tuple(ds[0]["finger_pose"].shape)
     (1, (736, 45))
     """

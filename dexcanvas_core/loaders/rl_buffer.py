@@ -100,8 +100,10 @@ class RLTrajectoryBuffer:
 
     All trajectories are loaded at construction (memory: total frames × field sizes).
 
-    >>> from dexcanvas_core import RLTrajectoryBuffer, builtin_demonstration_path
-    >>> buf = RLTrajectoryBuffer(builtin_demonstration_path("cube2/tripod"), num_envs=2)
+    >>> from dexcanvas_core import DexCanvasDataset, RLTrajectoryBuffer, builtin_demonstration_path
+    >>> path = builtin_demonstration_path("cube2/tripod")
+    >>> ds = DexCanvasDataset(path, objects=["cube2"], manipulation_types=["tripod"])
+    >>> buf = RLTrajectoryBuffer(ds, num_envs=2)
     >>> tuple(buf.get_observations()["finger_pose"].shape)
     (2, 45)
     >>> buf.advance_timesteps().tolist()  # (E,) bool: which environments reached their end
