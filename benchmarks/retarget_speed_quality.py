@@ -78,7 +78,7 @@ from benchmarks._common import (
     resolve_out,
     versions,
 )
-from dexcanvas_core.demos.geometry import object_geometry
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.taxonomy import GROUPS
 from retarget.baselines import (
     DexRetargetingBaseline,

@@ -69,7 +69,7 @@ from benchmarks._common import (
     result_path,
     versions,
 )
-from dexcanvas_core.demos.geometry import object_geometry
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.table import table_of
 from dexcanvas_core.taxonomy import Pair
 from dexcanvas_core.trajectory import HandTrack, ObjectTrack, Trajectory

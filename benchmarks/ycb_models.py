@@ -45,8 +45,8 @@ from benchmarks._common import (
 )
 from dexcanvas_core.demos import DemoError, generate_demo
 from dexcanvas_core.demos.feasibility import feasibility
-from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.errors import DexCanvasError
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.sim.scene import OBJECT_BODY, add_object
 from dexcanvas_core.taxonomy import MANIPULATION_TYPES, OBJECTS, Pair, clear_objects, use_objects
 from retarget.hands import get_hand

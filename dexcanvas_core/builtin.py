@@ -29,26 +29,18 @@ import os
 import sys
 from pathlib import Path
 
+from dexcanvas_core.cache import cache_dir
+from dexcanvas_core.demos import DEMOS_VERSION, DemoError, build_builtin, builtin_plan
+from dexcanvas_core.errors import DatasetError
+from dexcanvas_core.taxonomy import OBJECTS, Pair, custom_objects
+
 log = logging.getLogger(__name__)
-
-
-def cache_dir() -> Path:
-    """Directory for generated data (``$DEXCANVAS_CACHE_DIR`` overrides the platform default)."""
-    env = os.environ.get("DEXCANVAS_CACHE_DIR")
-    if env:
-        return Path(env).expanduser()
-    from platformdirs import user_cache_dir
-
-    return Path(user_cache_dir("dexcanvas-retarget"))
 
 
 def builtin_dataset_name() -> str:
     """File name of the cached built-in dataset: changes with the generator's version and with
     the models given to catalogue objects (``--objects``, ``--objects-dir``), since the
     demonstrations are generated on the shapes in use."""
-    from dexcanvas_core.demos import DEMOS_VERSION
-    from dexcanvas_core.taxonomy import OBJECTS, custom_objects
-
     given = [s for s in custom_objects().values() if s.id in OBJECTS]
     return f"builtin-demos-v{DEMOS_VERSION}{_shapes_suffix(given)}.lance"
 
@@ -102,8 +94,6 @@ def default_dataset_path(progress: bool | None = None, workers: int | None = Non
         return path
     with _build_lock(path):
         if not _built(path):  # another process may have built it meanwhile
-            from dexcanvas_core.demos import build_builtin
-
             workers = workers or os.cpu_count() or 1
             log.info("building the built-in dataset at %s (%d processes)", path, workers)
             build_builtin(path, progress=_show(progress), workers=workers)
@@ -111,10 +101,12 @@ def default_dataset_path(progress: bool | None = None, workers: int | None = Non
 
 
 def builtin_pair_path(pair) -> Path:
-    """Where one pair's built-in demonstration is cached (``"cube2/tripod"`` or a ``Pair``)."""
-    from dexcanvas_core.demos import DEMOS_VERSION
-    from dexcanvas_core.taxonomy import Pair
+    """Where one pair's built-in demonstration is cached (``"cube2/tripod"`` or a ``Pair``).
 
+    >>> from dexcanvas_core import builtin_pair_path
+    >>> builtin_pair_path("cube2/tripod").name
+    'cube2.tripod.lance'
+    """
     p = pair if isinstance(pair, Pair) else Pair.parse(pair)
     folder = cache_dir() / f"builtin-demos-v{DEMOS_VERSION}-pairs"
     shape = _shapes_suffix([p.object] if p.object.mesh else [])
@@ -144,10 +136,11 @@ def builtin_demonstration_path(pair, progress: bool | None = None) -> Path:
         DatasetError: the pair is not in the built-in set, or its demonstration fails the
             plausibility checks (the whole set leaves it out too); the message says which and
             how to proceed.
-    """
-    from dexcanvas_core.demos import DemoError, build_builtin, builtin_plan
-    from dexcanvas_core.errors import DatasetError
 
+    >>> from dexcanvas_core import builtin_demonstration_path
+    >>> builtin_demonstration_path("cube2/tripod").suffix
+    '.lance'
+    """
     cached = builtin_demonstration_cached(pair)
     if cached is not None:
         return cached

@@ -14,7 +14,12 @@ from pathlib import Path
 
 from dexcanvas_core import __version__
 from dexcanvas_core.capture.cli import add_import_parser, run_import_command
+from dexcanvas_core.demos import BuildConfig, run_build
 from dexcanvas_core.errors import DexCanvasError
+from dexcanvas_core.example import build_example_dataset
+from dexcanvas_core.io import export_parquet, open_dataset
+from dexcanvas_core.io.decode import row_to_trajectory
+from dexcanvas_core.loaders.selection import select_rows
 from dexcanvas_core.objects.options import add_object_options, use_object_options
 
 
@@ -37,8 +42,6 @@ def run_info(cfg: InfoConfig) -> dict:
     """Summarise a dataset; print a table (or JSON) and return the summary."""
     from rich.console import Console
     from rich.table import Table
-
-    from dexcanvas_core.io import open_dataset
 
     info = open_dataset(cfg.path).info()
     d = info.to_dict()
@@ -80,9 +83,6 @@ def run_validate(cfg: ValidateConfig) -> int:
     from rich.console import Console
     from rich.progress import track
 
-    from dexcanvas_core.io import open_dataset
-    from dexcanvas_core.io.decode import row_to_trajectory
-
     con = Console()
     ds = open_dataset(cfg.path)
     n = len(ds)
@@ -112,9 +112,6 @@ class ExportConfig:
 
 def run_export(cfg: ExportConfig) -> Path:
     """Export a dataset (optionally filtered) to a Parquet file."""
-    from dexcanvas_core.io import export_parquet, open_dataset
-    from dexcanvas_core.loaders.selection import select_rows
-
     sel = select_rows(
         open_dataset(cfg.path),
         manipulation_types=list(cfg.manipulation_types) or None,
@@ -135,8 +132,6 @@ class ExampleConfig:
 
 def run_example(cfg: ExampleConfig) -> Path:
     """Write the built-in example dataset (synthetic, public layout) to ``cfg.out``."""
-    from dexcanvas_core.example import build_example_dataset
-
     out = build_example_dataset(cfg.out, seed=cfg.seed, overwrite=cfg.overwrite, progress=True)
     print(f"wrote {out}")
     return out
@@ -144,8 +139,6 @@ def run_example(cfg: ExampleConfig) -> Path:
 
 def run_demos_build_command(args: argparse.Namespace) -> int:
     """``dexcanvas demos build``: generate demonstrations; returns the number that failed."""
-    from dexcanvas_core.demos import BuildConfig, run_build
-
     cfg = BuildConfig(
         out=args.out,
         pairs=tuple(args.pairs) if args.pairs else None,
@@ -164,7 +157,10 @@ def run_fit_command(args: argparse.Namespace) -> dict:
     """``dexcanvas fit``: markers → MANO + object poses dataset with per-frame quality flags."""
     from rich.console import Console
 
-    from dexcanvas_core.mocap import FitConfig, run_fit
+    from dexcanvas_core.mocap import (  # lazy: mocap (scipy.signal/stats) ~1.2 s on --help
+        FitConfig,
+        run_fit,
+    )
 
     cfg = FitConfig(
         markers=args.markers,
@@ -188,8 +184,8 @@ def run_fit_command(args: argparse.Namespace) -> dict:
 
 
 def _sim_config(args: argparse.Namespace):
-    from dexcanvas_core.sim.mpc import MPCConfig
-    from dexcanvas_core.sim.pipeline import SimConfig
+    from dexcanvas_core.sim.mpc import MPCConfig  # lazy: mujoco ~0.5 s on --help
+    from dexcanvas_core.sim.pipeline import SimConfig  # lazy: mujoco ~0.5 s on --help
 
     return SimConfig(
         tracker=args.tracker,
@@ -200,7 +196,7 @@ def _sim_config(args: argparse.Namespace):
 
 def run_simulate_command(args: argparse.Namespace) -> dict:
     """``dexcanvas simulate``: track one demonstration in physics, write contacts and forces."""
-    from dexcanvas_core.sim.run import SimulateConfig, run_simulate
+    from dexcanvas_core.sim.run import SimulateConfig, run_simulate  # lazy: mujoco ~0.5 s on --help
 
     return run_simulate(
         SimulateConfig(
@@ -219,8 +215,11 @@ def run_synthesize_command(args: argparse.Namespace) -> dict:
     """``dexcanvas synthesize``: perturbed re-tracking, keeping the successful rollouts."""
     import numpy as np
 
-    from dexcanvas_core.sim.run import SynthesizeConfig, run_synthesize
-    from dexcanvas_core.sim.synthesis import PerturbationRanges
+    from dexcanvas_core.sim.run import (  # lazy: mujoco ~0.5 s on --help
+        SynthesizeConfig,
+        run_synthesize,
+    )
+    from dexcanvas_core.sim.synthesis import PerturbationRanges  # lazy: mujoco ~0.5 s on --help
 
     ranges = PerturbationRanges(
         size=args.size,
@@ -336,7 +335,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
     s.add_argument("--workers", type=int, default=1, help="processes")
     s.add_argument("--limit", type=int, default=None, help="only the first N source rows")
-    from dexcanvas_core.sim.synthesis import PerturbationRanges
+    from dexcanvas_core.sim.synthesis import PerturbationRanges  # lazy: mujoco ~0.5 s on --help
 
     d = PerturbationRanges()
     g = s.add_argument_group("perturbation half-widths (uniform, relative unless noted)")

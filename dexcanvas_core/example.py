@@ -19,7 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
+from dexcanvas_core.io import write_dataset
+from dexcanvas_core.keypoints import MANO_FINGER_ORDER
+from dexcanvas_core.mano import HandSkeleton, ManoLayer
 from dexcanvas_core.rotations import aa_to_matrix, matrix_to_aa
+from dexcanvas_core.taxonomy import Pair
 from dexcanvas_core.trajectory import HandTrack, ObjectMove, ObjectTrack, Trajectory
 
 log = logging.getLogger(__name__)
@@ -72,8 +76,6 @@ def _object_half_width(spec) -> float:
 
 def _grasp_pose(mtype, half_width: float, rng: np.random.Generator) -> np.ndarray:
     """45-D finger pose (MANO order) closing the type's fingers around an object of that width."""
-    from dexcanvas_core.keypoints import MANO_FINGER_ORDER
-
     # Flexion about the template +z axis curls a finger toward the palm (-y). Smaller objects
     # need more flexion; the participating fingers flex, the others fold loosely away.
     flex = float(np.clip(1.2 - 6.0 * half_width, 0.35, 1.0))
@@ -96,9 +98,6 @@ def _grasp_pose(mtype, half_width: float, rng: np.random.Generator) -> np.ndarra
 def example_trajectories(seed: int = 0, reps: int = 1) -> Iterator[Trajectory]:
     """Yield the example demonstrations: every pair × operator × ``reps``, deterministic in seed."""
     import torch
-
-    from dexcanvas_core.mano import HandSkeleton, ManoLayer
-    from dexcanvas_core.taxonomy import Pair
 
     T = round(PHASES[-1] * FPS) + 1
     t = np.arange(T) / FPS
@@ -191,8 +190,6 @@ def build_example_dataset(
     progress: bool = False,
 ) -> Path:
     """Write the example dataset (Lance, public layout) to ``out``; returns the path."""
-    from dexcanvas_core.io import write_dataset
-
     n = len(EXAMPLE_PAIRS) * len(OPERATORS) * reps
     trajs = example_trajectories(seed=seed, reps=reps)
     if progress:

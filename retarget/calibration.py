@@ -54,7 +54,7 @@ from scipy.spatial.transform import Rotation
 
 from dexcanvas_core.demos import feasible_pairs, generate_demo, spread_pairs
 from dexcanvas_core.demos import operator as operator_by_name
-from dexcanvas_core.demos.geometry import object_geometry
+from dexcanvas_core.objects.geometry import object_geometry
 from retarget.config import RetargetConfig
 from retarget.errors import RetargetError
 from retarget.hands import get_hand

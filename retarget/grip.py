@@ -10,8 +10,7 @@ from typing import Literal
 import numpy as np
 
 from dexcanvas_core.rotations import aa_to_matrix, aa_to_quat_wxyz
-from dexcanvas_core.sim.grip import carried_load
-from dexcanvas_core.sim.pipeline import capture_acceleration
+from dexcanvas_core.sim.physics import capture_acceleration, carried_load
 from dexcanvas_core.table import DEFAULT_TABLE
 from dexcanvas_core.trajectory import FORCE_GROUPS, Trajectory
 from retarget._checks import check_choice, check_range
@@ -41,7 +40,7 @@ class GripConfig:
     object's weight and motion need. Default 3."""
     lead_s: float = 0.15
     """``mode="wrench"``: the weight is carried from this long [s] before the object leaves the
-    table (``dexcanvas_core.sim.grip.carried_load``). Default 0.15."""
+    table (``dexcanvas_core.sim.physics.carried_load``). Default 0.15."""
     surface_normals: bool = True
     """``mode="wrench"``: press each contacting link along the object's normal where it touches
     (when within 45° of the human contact's normal) instead of the human contact's normal.
@@ -71,7 +70,7 @@ class GripAssembly:
         """Per-frame object wrench the hand must supply: ``λ m (a + g ẑ)`` and no torque about
         the centre of mass, with ``a`` the object's captured acceleration (50 ms smoothing) and
         ``λ`` the share of the weight the hand carries (the force pipeline's
-        ``sim.grip.carried_load``: 0 while the object rests on the table, 1 off it, built up
+        ``sim.physics.carried_load``: 0 while the object rests on the table, 1 off it, built up
         over the ``grip.lead_s`` before lift-off: the grip must be there when the table stops
         helping)."""
         T, F = traj.num_frames, len(self.tip_sites)

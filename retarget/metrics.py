@@ -11,7 +11,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from dexcanvas_core.demos.geometry import object_record
+from dexcanvas_core.objects.geometry import object_record
 from dexcanvas_core.rotations import aa_to_matrix
 from dexcanvas_core.table import table_of
 from dexcanvas_core.trajectory import FORCE_GROUPS

@@ -19,7 +19,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from dexcanvas_core.demos.geometry import ObjectGeometry, object_geometry
+from dexcanvas_core.objects.geometry import ObjectGeometry, object_geometry
 from dexcanvas_core.sim.mpc import MPCConfig
 from dexcanvas_core.sim.pipeline import SimConfig, simulate
 from dexcanvas_core.table import table_of

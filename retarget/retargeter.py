@@ -77,8 +77,9 @@ class Retargeter(HumanTargets, GripAssembly, FrameSolver):
 
     Args:
         hand: a ``retarget.hands.HandModel`` (see ``retarget.hands.get_hand``).
-        geometry: the object's ``ObjectGeometry`` (``dexcanvas_core.demos.object_geometry``);
-            ``None`` retargets the hand alone (keypoint-only use).
+        geometry: the object's ``ObjectGeometry``
+            (``dexcanvas_core.objects.geometry.object_geometry``); ``None`` retargets the hand
+            alone (keypoint-only use).
         config: weights and switches (default ``RetargetConfig()``).
         table: the table of the trajectories it will retarget (``table_of(trajectory)``;
             default the default table): the hand keeps ``collision.table_clearance`` above its

@@ -1,10 +1,10 @@
 """MuJoCo scenes for retargeting and re-simulation: a robot hand plus a catalogue object.
 
-The object is built from its primitive composition (``dexcanvas_core.demos.object_geometry``):
-one geom per primitive, the catalogue mass spread over the primitives by volume. In the
-retargeting scene the object is a mocap body (kinematic, posed from the human data); in the
-re-simulation scene it is a free body on a table (a box of finite extent,
-:class:`dexcanvas_core.table.Table`).
+The object is built from its primitive composition
+(``dexcanvas_core.objects.geometry.object_geometry``): one geom per primitive, the catalogue
+mass spread over the primitives by volume. In the retargeting scene the object is a mocap body
+(kinematic, posed from the human data); in the re-simulation scene it is a free body on a
+table (a box of finite extent, :class:`dexcanvas_core.table.Table`).
 """
 
 from __future__ import annotations

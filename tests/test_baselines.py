@@ -7,8 +7,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.example import example_trajectories
+from dexcanvas_core.objects.geometry import object_geometry
 from retarget.baselines import KinematicMetrics, measure_trajectory
 from retarget.errors import RetargetError
 from retarget.hands import available_hands, get_hand

@@ -18,17 +18,17 @@ from dexcanvas_core.demos import (
     feasibility_table,
     feasible_pairs,
     generate_demo,
-    object_geometry,
     run_build,
     solve_grasp,
 )
 from dexcanvas_core.demos.checks import lift_grip_ratio
-from dexcanvas_core.demos.geometry import ObjectGeometry, Primitive
 from dexcanvas_core.demos.grasp import cached_grasp
 from dexcanvas_core.demos.grasp_problem import GRIP_RATIO_MAX, HOLD_RATIO_MAX
-from dexcanvas_core.demos.hand import DOF_HIGH, DOF_LOW, N_DOF, hand_model
 from dexcanvas_core.errors import UnknownNameError
 from dexcanvas_core.keypoints import MANO21
+from dexcanvas_core.mano.hand_model import DOF_HIGH, DOF_LOW, N_DOF, hand_model
+from dexcanvas_core.objects.geometry import ObjectGeometry, object_geometry
+from dexcanvas_core.objects.primitives import Primitive
 from dexcanvas_core.rotations import aa_to_matrix
 from dexcanvas_core.taxonomy import MANIPULATION_TYPES, OBJECTS
 

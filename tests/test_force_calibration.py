@@ -138,7 +138,7 @@ def shadow_force_matched():
     """Shadow force-matched on the built-in cube2/tripod, the human's forces from the force
     pipeline's open-loop tracker, and its stiff-contact re-simulation."""
     from dexcanvas_core.demos import generate_demo
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
     from dexcanvas_core.sim.pipeline import SimConfig, simulate
     from retarget.hands import get_hand
     from retarget.retargeter import Retargeter

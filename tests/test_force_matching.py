@@ -219,7 +219,7 @@ def human_with_forces():
 
 
 def test_retargeter_matches_the_human_object_force(human_with_forces):
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
     from dexcanvas_core.rotations import aa_to_matrix
     from retarget.hands import get_hand
     from retarget.retargeter import Retargeter
@@ -321,7 +321,7 @@ def test_force_scale_squeezes_harder_with_the_same_object_force(human_with_force
     """``force_scale``: the plan asks for that multiple of the human's finger forces; the extra
     is squeeze between the fingers, so the object's net force stays the required one, and the
     metrics' human side stays the human's own forces."""
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
     from retarget.errors import RetargetError
     from retarget.hands import get_hand
     from retarget.retargeter import Retargeter
@@ -368,7 +368,7 @@ def test_contact_flags_come_from_the_captured_geometry_unless_asked(human_with_f
     the force pipeline's records, where the simulated hand touched."""
     import dataclasses
 
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
     from retarget.hands import get_hand
     from retarget.retargeter import Retargeter
 
@@ -394,7 +394,7 @@ def test_contact_flags_come_from_the_captured_geometry_unless_asked(human_with_f
 
 def test_force_matching_without_forces_says_what_to_do():
     from dexcanvas_core.demos import generate_demo
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
     from retarget.hands import get_hand
     from retarget.retargeter import Retargeter
 
@@ -499,8 +499,8 @@ def test_refinement_rescues_a_failing_replay_and_reports_its_cost():
     open loop): replayed open loop (default soft contacts) the cuboid
     slips out (at frame 304); the sampling MPC on the robot hand keeps it (DexCanvas rule, no
     frame over 5 cm), moving the commanded wrist by under a millimetre (0.7 mm)."""
-    from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.loaders.selection import load_demonstration
+    from dexcanvas_core.objects.geometry import object_geometry
     from dexcanvas_core.rotations import aa_to_matrix
     from retarget.hands import get_hand
     from retarget.refine import RefineConfig, refine
@@ -555,8 +555,8 @@ def test_refinement_backtracking_resumes_exactly_from_its_checkpoints():
     that keeps losing the object uses every retry and reports them; bad settings are refused."""
     from dataclasses import replace
 
-    from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.loaders.selection import load_demonstration
+    from dexcanvas_core.objects.geometry import object_geometry
     from dexcanvas_core.sim.mpc import SamplingMPC
     from retarget.hands import get_hand
     from retarget.refine import RefineConfig, _checkpoint, _restore, refine
@@ -601,8 +601,8 @@ def test_refinement_backtracking_resumes_exactly_from_its_checkpoints():
 
 def test_refinement_runs_on_a_gripper_whose_fingers_are_shared():
     """The panda gripper drives index and middle with one finger: one tip site, listed twice."""
-    from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.loaders.selection import load_demonstration
+    from dexcanvas_core.objects.geometry import object_geometry
     from retarget.hands import get_hand
     from retarget.refine import RefineConfig, refine
     from retarget.retargeter import Retargeter
@@ -621,8 +621,8 @@ def test_viz_replays_a_force_matching_run_exactly(human_with_forces, tmp_path):
     """Stills and reports replay the run's re-simulation: with --forces, its stiff contacts."""
     import json
 
-    from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.io import write_dataset
+    from dexcanvas_core.objects.geometry import object_geometry
     from retarget.cli import main
     from retarget.hands import get_hand
     from retarget.viz.resim import record_resimulation
@@ -670,8 +670,8 @@ def test_refinement_finger_action_closes_the_finger_on_the_object():
     the other frames, and for the wrist, the columns are unchanged."""
     import mujoco
 
-    from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.loaders.selection import load_demonstration
+    from dexcanvas_core.objects.geometry import object_geometry
     from retarget.hands import get_hand
     from retarget.refine import RefineConfig
     from retarget.refine_scene import tracking_env
@@ -722,8 +722,8 @@ def test_refinement_finger_action_scales_the_force_offset_by_the_offset_gain():
     """``RefineConfig.offset_gain``: each finger's action column (without the closing step) is
     that finger's servo offsets ``q_command − q`` times the gain, on its own actuators only;
     the wrist's columns do not change with it."""
-    from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.loaders.selection import load_demonstration
+    from dexcanvas_core.objects.geometry import object_geometry
     from retarget.hands import get_hand
     from retarget.refine import RefineConfig
     from retarget.refine_scene import tracking_env
@@ -759,8 +759,8 @@ def test_refinement_closing_step_moves_coupled_joints_with_their_servo():
     import mujoco
     from robot_poses import coupled
 
-    from dexcanvas_core.demos.geometry import object_geometry
     from dexcanvas_core.loaders.selection import load_demonstration
+    from dexcanvas_core.objects.geometry import object_geometry
     from retarget.hands import get_hand
     from retarget.refine import RefineConfig
     from retarget.refine_scene import tracking_env
@@ -991,7 +991,7 @@ def test_force_benchmark_scores_every_variant_against_the_human_without_d(human_
     """``python -m benchmarks.force_preservation --variants c``: (c)'s force columns come from the
     human's forces mapped onto the hand (``Retargeter.human_finger_forces``), the same numbers
     as when (d) runs beside it; (d)'s own mapping is that one too."""
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
     from retarget.hands import get_hand
     from retarget.retargeter import Retargeter
 
@@ -1024,7 +1024,7 @@ def test_force_matching_backs_unloaded_touching_fingers_off_the_surface(human_wi
     """A finger the captured hand touches the object with while the human's simulated finger
     presses nothing is commanded ``idle_contact_clearance`` off the surface (its servo presses
     nowhere the human did not); frames without such a finger are commanded as without it."""
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
     from retarget.hands import get_hand
     from retarget.retargeter import Retargeter
 

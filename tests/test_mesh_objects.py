@@ -12,11 +12,10 @@ import pytest
 import trimesh
 
 from dexcanvas_core.demos import generate_demo
-from dexcanvas_core.demos.geometry import mesh_object_geometry, object_geometry, object_record
 from dexcanvas_core.errors import UnknownNameError, ValidationError
+from dexcanvas_core.objects.geometry import mesh_object_geometry, object_geometry, object_record
 from dexcanvas_core.objects.manifest import read_manifest
-from dexcanvas_core.objects.mesh import load_object_mesh, mesh_collision
-from dexcanvas_core.objects.parts import convex_parts
+from dexcanvas_core.objects.mesh import convex_parts, load_object_mesh, mesh_collision
 from dexcanvas_core.objects.sdf import SdfGrid
 from dexcanvas_core.sim.scene import OBJECT_BODY, add_object, add_table
 from dexcanvas_core.taxonomy import (

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from robot_poses import coupled, human_from_robot_poses
 
-from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.example import example_trajectories
 from dexcanvas_core.io import write_dataset
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.rotations import aa_to_matrix
 from dexcanvas_core.trajectory import Trajectory
 from retarget.cli import main

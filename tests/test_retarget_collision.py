@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from robot_poses import coupled, human_from_robot_poses
 
-from dexcanvas_core.demos.geometry import object_geometry
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.trajectory import Trajectory
 from retarget.config import (
     PostureConfig,

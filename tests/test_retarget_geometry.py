@@ -31,7 +31,7 @@ def shapes(tmp_path_factory):
     """``{"phone": (geometry, tripod demonstration), "apple": (geometry, four-finger power
     sphere demonstration)}``, generated with the manifest in use (and forgotten after)."""
     from dexcanvas_core.demos import generate_demo
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
     from dexcanvas_core.taxonomy import clear_objects, use_objects
 
     base = tmp_path_factory.mktemp("geometry")

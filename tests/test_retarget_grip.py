@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.loaders.selection import load_demonstration
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.rotations import aa_to_matrix
 from retarget.config import GripConfig, RetargetConfig
 from retarget.grip import opposed_contacts

@@ -11,10 +11,10 @@ import pytest
 
 from dexcanvas_core.cli import main as dexcanvas_main
 from dexcanvas_core.demos import generate_demo
-from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.errors import DatasetError, ValidationError
 from dexcanvas_core.io import open_dataset, write_dataset
 from dexcanvas_core.mano.skeleton import HandSkeleton
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.sim.forces import read_contacts
 from dexcanvas_core.sim.grip import balanced_forces, squeeze_offsets
 from dexcanvas_core.sim.hand import (

@@ -1,4 +1,4 @@
-"""Grip force–load coupling of the force pipeline (``dexcanvas_core.sim.grip.carried_load``)."""
+"""Grip force–load coupling of the force pipeline (``dexcanvas_core.sim.physics.carried_load``)."""
 
 from __future__ import annotations
 
@@ -8,14 +8,10 @@ import numpy as np
 import pytest
 
 from dexcanvas_core.demos import OPERATORS, generate_demo
-from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.errors import ValidationError
-from dexcanvas_core.sim.grip import (
-    GRAVITY,
-    carried_load,
-    contact_keeping_force,
-    squeeze_offsets,
-)
+from dexcanvas_core.objects.geometry import object_geometry
+from dexcanvas_core.sim.grip import contact_keeping_force, squeeze_offsets
+from dexcanvas_core.sim.physics import GRAVITY, carried_load
 from dexcanvas_core.sim.pipeline import SimConfig, prepare, simulate
 from dexcanvas_core.sim.tracker import TrackingConfig, TrackingEnv
 

@@ -10,10 +10,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from dexcanvas_core.demos import generate_demo
-from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.keypoints import FINGERS, MANO21
 from dexcanvas_core.mocap import fit_markers, render_markers
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.sim.grip import distal_geoms
 from dexcanvas_core.sim.hand import HINGE_HIGH, HINGE_LOW
 from dexcanvas_core.sim.pipeline import SimConfig, prepare, simulate

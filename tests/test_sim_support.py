@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from dexcanvas_core.demos.geometry import object_geometry
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.sim.support import hold_until_frame, rests_stably
 
 EDGE = 0.05  # cube2

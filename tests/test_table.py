@@ -146,7 +146,7 @@ def _table_distance(rt, q: np.ndarray) -> float:
 
 
 def test_retargeting_keeps_clear_of_the_table_only_over_it():
-    from dexcanvas_core.demos.geometry import object_geometry
+    from dexcanvas_core.objects.geometry import object_geometry
     from retarget.errors import RetargetError
     from retarget.hands import get_hand
     from retarget.retargeter import Retargeter

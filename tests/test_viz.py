@@ -22,8 +22,8 @@ from PIL import Image
 from system_packages import require, requires
 
 from dexcanvas_core.demos import generate_demo
-from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.io import write_dataset
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.trajectory import CONTACT_PARTS, FORCE_GROUPS, Contacts, part_group
 from retarget.cli import main
 from retarget.hands import get_hand

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from dexcanvas_core.demos.geometry import object_geometry
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.trajectory import HandTrack, ObjectTrack, Trajectory
 from retarget.errors import RetargetError
 from retarget.hands import WristGains, get_hand

@@ -26,8 +26,9 @@ from benchmarks.force_preservation.config import (
     RUN_VARIANTS,
     BenchConfig,
 )
-from dexcanvas_core.demos.geometry import object_geometry
-from dexcanvas_core.sim.pipeline import GRAVITY, simulate
+from dexcanvas_core.objects.geometry import object_geometry
+from dexcanvas_core.sim.physics import GRAVITY
+from dexcanvas_core.sim.pipeline import simulate
 from dexcanvas_core.taxonomy import Pair
 from retarget.baselines import (
     DexRetargetingBaseline,

@@ -18,9 +18,9 @@ from dexcanvas_core.capture import ImportConfig, run_import, use_dataset_objects
 from dexcanvas_core.capture.export import geometry_mesh, trajectory_to_arrays, write_mano_npz
 from dexcanvas_core.capture.formats import READERS
 from dexcanvas_core.capture.stress import hold_range, peaks, stress_arrays
-from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.io import open_dataset
 from dexcanvas_core.loaders.selection import load_demonstration
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.objects.mesh import load_object_mesh
 from dexcanvas_core.safe_pickle import load_pickle  # comes with the ho3d reader
 

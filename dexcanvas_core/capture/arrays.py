@@ -46,9 +46,12 @@ from typing import Any
 import numpy as np
 
 from dexcanvas_core.capture.capture import Capture
+from dexcanvas_core.capture.fit import fit_pose_to_keypoints
 from dexcanvas_core.capture.world import mirror_capture, to_z_up, up_vector
 from dexcanvas_core.errors import ValidationError
-from dexcanvas_core.mano.pose import mirror_axis_angle
+from dexcanvas_core.keypoints import convert_keypoints
+from dexcanvas_core.mano import ManoLayer
+from dexcanvas_core.mano.pose import MANO_HANDS_MEAN_RIGHT, mirror_axis_angle
 
 KEYS: tuple[str, ...] = (
     "fps", "global_orient", "hand_pose", "flat_hand_mean", "wrist_pos", "transl", "betas",
@@ -268,8 +271,6 @@ def capture_from_arrays(
     betas = _array(arrays, "betas", (10,), where) if "betas" in arrays else np.zeros(10)
     keypoints = None
     if "keypoints" in arrays:
-        from dexcanvas_core.keypoints import convert_keypoints
-
         kp = _array(arrays, "keypoints", (T, 21, 3), where)
         _check_units("keypoints", kp, where)
         keypoints = convert_keypoints(kp, "openpose21", "mano21")
@@ -351,8 +352,6 @@ def capture_from_arrays(
         table = float(table)
     source = _string(arrays, "source", where) if "source" in arrays else where
     if not flat:
-        from dexcanvas_core.mano.pose import MANO_HANDS_MEAN_RIGHT
-
         mean = (
             MANO_HANDS_MEAN_RIGHT if side == "right" else mirror_axis_angle(MANO_HANDS_MEAN_RIGHT)
         )
@@ -389,9 +388,6 @@ def _pose_from_keypoints(arrays: Mapping[str, Any], where: str) -> tuple[dict, f
     """``arrays`` with ``global_orient``, ``hand_pose`` and ``wrist_pos`` fitted to its
     ``keypoints`` (a left hand's are mirrored for the fit and the result mirrored back), and the
     fit's mean keypoint distance [mm]."""
-    from dexcanvas_core.capture.fit import fit_pose_to_keypoints
-    from dexcanvas_core.keypoints import convert_keypoints
-
     kp = _array(arrays, "keypoints", (None, 21, 3), where)
     _check_units("keypoints", kp, where)
     if "wrist_pos" in arrays or "transl" in arrays:
@@ -418,7 +414,5 @@ def _pose_from_keypoints(arrays: Mapping[str, Any], where: str) -> tuple[dict, f
 def _rest_wrist(betas: np.ndarray, side: str) -> np.ndarray:
     """(3,) MANO's wrist joint J0 [m] at rest for ``betas`` (the exact model when
     ``$MANO_MODEL_DIR`` holds it, else the built-in skeleton's mean J0)."""
-    from dexcanvas_core.mano import ManoLayer
-
     out = ManoLayer(side).forward_numpy(betas=betas[None], hand_pose=np.zeros((1, 45)))
     return out.keypoints[0, 0]

@@ -6,7 +6,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from dexcanvas_core.capture import ImportConfig, run_import
 from dexcanvas_core.capture.importer import format_names
+from dexcanvas_core.errors import ValidationError
 
 
 def add_import_parser(sub) -> None:
@@ -56,8 +58,6 @@ def _fps_option(text: str) -> float | None:
     try:
         return float(text)
     except ValueError:
-        from dexcanvas_core.errors import ValidationError
-
         raise ValidationError(f"--fps must be a rate in Hz or 'native', got {text!r}") from None
 
 
@@ -66,8 +66,6 @@ def run_import_command(args: argparse.Namespace):
     from rich.console import Console
     from rich.progress import Progress
     from rich.table import Table
-
-    from dexcanvas_core.capture import ImportConfig, run_import
 
     fps = _fps_option(args.fps)
     cfg = ImportConfig(

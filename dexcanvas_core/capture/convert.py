@@ -27,6 +27,7 @@ import numpy as np
 
 from dexcanvas_core.capture.capture import Capture
 from dexcanvas_core.capture.world import object_points_world
+from dexcanvas_core.mano import ManoLayer, measure_bone_lengths
 from dexcanvas_core.rotations import quat_wxyz_to_aa
 from dexcanvas_core.table import DEFAULT_TABLE, Table
 from dexcanvas_core.trajectory import HandTrack, ObjectMove, ObjectTrack, Trajectory
@@ -48,8 +49,6 @@ CAP_MACHINE = "imported"
 
 def _fk(cap: Capture) -> tuple[np.ndarray, np.ndarray]:
     """(keypoints (T, 21, 3) posed at the capture's wrist, J0 of the hand used (3,))."""
-    from dexcanvas_core.mano import ManoLayer, measure_bone_lengths
-
     if cap.keypoints is not None:  # the subject's own bone lengths (betas are then moot)
         layer, betas = ManoLayer("right", bone_lengths=measure_bone_lengths(cap.keypoints)), None
     else:

@@ -40,6 +40,7 @@ def fit_pose_to_keypoints(keypoints: np.ndarray, iterations: int = 30) -> dict:
         ``{"global_orient" (T, 3), "hand_pose" (T, 45), "wrist_pos" (T, 3), "residual_mm"
         (T,) mean keypoint distance after the fit, "skeleton"}``.
     """
+    # lazy: the mocap package (scipy.signal, scipy.stats) adds ~1.5 s to `dexcanvas --help`
     from dexcanvas_core.mocap.fit import HandFitter
     from dexcanvas_core.mocap.model import HandMarkerModel
 

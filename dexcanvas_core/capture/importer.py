@@ -30,8 +30,12 @@ import numpy as np
 from dexcanvas_core.capture.arrays import capture_from_arrays
 from dexcanvas_core.capture.capture import Capture
 from dexcanvas_core.capture.convert import DEFAULT_FPS, capture_to_trajectory
+from dexcanvas_core.capture.formats import READERS, reader_for
 from dexcanvas_core.errors import DatasetError, UnknownNameError, ValidationError
-from dexcanvas_core.taxonomy.object_lookup import catalogue_spec
+from dexcanvas_core.io import write_dataset
+from dexcanvas_core.objects.manifest import check_mass, read_manifest
+from dexcanvas_core.objects.mesh import load_object_mesh
+from dexcanvas_core.taxonomy.object_lookup import add_objects_manifest, catalogue_spec, use_objects
 
 log = logging.getLogger(__name__)
 
@@ -134,8 +138,6 @@ def _read_all(cfg: ImportConfig, reader: Callable) -> Iterator[tuple[str, dict, 
 
 def read_captures(cfg: ImportConfig) -> list[Capture]:
     """Read and check every sequence of ``cfg`` (nothing is written)."""
-    from dexcanvas_core.capture.formats import reader_for
-
     reader = reader_for(cfg.format)
     caps = []
     for name, arrays, base_dir in _read_all(cfg, reader):
@@ -161,8 +163,6 @@ def _write_objects(caps: list[Capture], cfg: ImportConfig, dest: Path) -> dict[s
     objects' records. Checks every mesh (``load_object_mesh``) and mass first."""
     import trimesh
 
-    from dexcanvas_core.objects.manifest import check_mass, read_manifest
-
     user = {}
     if cfg.objects_manifest is not None:
         user = {e.id.lower(): e for e in read_manifest(cfg.objects_manifest)}
@@ -186,7 +186,6 @@ def _write_objects(caps: list[Capture], cfg: ImportConfig, dest: Path) -> dict[s
         mesh_file = dest / f"{oid}.obj"
         tm = trimesh.Trimesh(cap.mesh_vertices, cap.mesh_faces, process=False)
         mesh_file.write_text(trimesh.exchange.obj.export_obj(tm, include_normals=False))
-        from dexcanvas_core.objects.mesh import load_object_mesh
 
         try:
             checked = load_object_mesh(mesh_file)
@@ -225,9 +224,6 @@ def run_import(cfg: ImportConfig, progress: Callable[[int, int], None] | None = 
         ValidationError: a bad capture, mesh or mass (nothing is written).
         DatasetError: the output exists and ``overwrite`` is not set.
     """
-    from dexcanvas_core.io import write_dataset
-    from dexcanvas_core.taxonomy.object_lookup import use_objects
-
     out = Path(cfg.out).expanduser()
     objects_dir = out.with_name(out.name + OBJECTS_SUFFIX)
     if (out.exists() or objects_dir.exists()) and not cfg.overwrite:
@@ -282,13 +278,10 @@ def use_dataset_objects(dataset: str | os.PathLike | None) -> Path | None:
     m = dataset_objects_manifest(dataset)
     if m is None:
         return None
-    from dexcanvas_core.taxonomy.object_lookup import add_objects_manifest
 
     add_objects_manifest(m)
     return m
 
 
 def format_names() -> Sequence[str]:
-    from dexcanvas_core.capture.formats import READERS
-
     return tuple(READERS)

@@ -1,11 +1,10 @@
 """Generated hand–object demonstrations for every feasible (object, manipulation type) pair.
 
-The pipeline, one module per concept:
+The pipeline, one module per concept (object shapes are in :mod:`dexcanvas_core.objects.geometry`,
+the hand's kinematics and capsules in :mod:`dexcanvas_core.mano.hand_model`):
 
-* ``geometry`` — objects as unions of primitives with a signed distance (:func:`object_geometry`);
 * ``feasibility`` — which pairs a human hand can perform, and why (:func:`feasibility_table`);
 * ``operators`` — five hand sizes (:data:`OPERATORS`);
-* ``hand`` — batched MANO-skeleton kinematics and the capsule collision model;
 * ``grasp`` — grasp synthesis by optimisation on the skeleton (:func:`solve_grasp`);
 * ``motions`` — minimum-jerk scripts: pick-and-place, rolling, sliding, rotation, transfer;
 * ``checks`` — plausibility checks of a trajectory (:func:`check_trajectory`);
@@ -42,14 +41,11 @@ from dexcanvas_core.demos.feasibility import (
     feasible_pairs,
     spread_pairs,
 )
-from dexcanvas_core.demos.geometry import ObjectGeometry, Primitive, object_geometry
 from dexcanvas_core.demos.grasp import Grasp, solve_grasp
 from dexcanvas_core.demos.grasp_specs import GRASP_SPECS, GraspSpec
-from dexcanvas_core.demos.hand import CAPSULES, HandModel, hand_model
 from dexcanvas_core.demos.operators import OPERATORS, Operator, operator
 
 __all__ = [
-    "CAPSULES",
     "DEMOS_VERSION",
     "GRASP_SPECS",
     "OPERATORS",
@@ -64,11 +60,8 @@ __all__ = [
     "Feasibility",
     "Grasp",
     "GraspSpec",
-    "HandModel",
-    "ObjectGeometry",
     "Operator",
     "PlausibilityReport",
-    "Primitive",
     "build_builtin",
     "build_demos",
     "builtin_pairs",
@@ -78,8 +71,6 @@ __all__ = [
     "feasibility_table",
     "feasible_pairs",
     "generate_demo",
-    "hand_model",
-    "object_geometry",
     "operator",
     "report_path",
     "run_build",

@@ -24,6 +24,7 @@ from dexcanvas_core.demos.demo import Demo, DemoError, generate_demo
 from dexcanvas_core.demos.feasibility import feasibility, feasible_pairs
 from dexcanvas_core.demos.operators import OPERATORS
 from dexcanvas_core.errors import DatasetError, ValidationError
+from dexcanvas_core.io import write_dataset
 from dexcanvas_core.taxonomy import Pair
 
 log = logging.getLogger(__name__)
@@ -319,7 +320,6 @@ def write_plan(
     Raises:
         DemoError: no demonstration passed the checks (nothing written).
     """
-    from dexcanvas_core.io import write_dataset
 
     def generate(on_done) -> Iterator:
         for k, ((p, op, s), (demo, error)) in enumerate(

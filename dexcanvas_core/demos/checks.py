@@ -33,11 +33,11 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from dexcanvas_core.demos.geometry import ObjectGeometry, object_geometry
-from dexcanvas_core.demos.hand import CAPSULE_INDEX, CAPSULES, hand_model
 from dexcanvas_core.errors import ValidationError
+from dexcanvas_core.mano.hand_model import CAPSULE_INDEX, CAPSULES, hand_model
 from dexcanvas_core.mano.limits import anatomical_angles, limit_violation
 from dexcanvas_core.mano.skeleton import HandSkeleton, measure_bone_lengths
+from dexcanvas_core.objects.geometry import ObjectGeometry, object_geometry
 from dexcanvas_core.rotations import aa_to_matrix
 from dexcanvas_core.table import Table, table_of
 from dexcanvas_core.trajectory import Trajectory

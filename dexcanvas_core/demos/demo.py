@@ -18,10 +18,8 @@ from dexcanvas_core.demos.checks import (
 )
 from dexcanvas_core.demos.feasibility import feasibility
 from dexcanvas_core.demos.finger_problems import closing_path, in_hand_error, solve_fingers
-from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.demos.grasp import Grasp, cached_grasp, grasp_badness
 from dexcanvas_core.demos.grasp_problem import CLOSURE_MAX
-from dexcanvas_core.demos.hand import hand_model
 from dexcanvas_core.demos.motions import (
     ScriptContext,
     finger_transfer,
@@ -34,8 +32,10 @@ from dexcanvas_core.demos.operators import Operator
 from dexcanvas_core.demos.operators import operator as get_operator
 from dexcanvas_core.demos.timeline import FPS, Timeline
 from dexcanvas_core.errors import DexCanvasError, ValidationError
+from dexcanvas_core.mano.hand_model import hand_model
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.rotations import aa_to_matrix, matrix_to_aa
-from dexcanvas_core.taxonomy import Pair
+from dexcanvas_core.taxonomy import Pair, object_spec
 from dexcanvas_core.trajectory import HandTrack, ObjectMove, ObjectTrack, Trajectory
 
 log = logging.getLogger(__name__)
@@ -196,8 +196,6 @@ def generate_demo(
 
 def geometry_key(object_id: str) -> str:
     """Objects that share a geometry share grasps: a heavy variant uses its light base's."""
-    from dexcanvas_core.taxonomy import object_spec
-
     spec = object_spec(object_id)
     return spec.base_id if spec.base_id else spec.id
 

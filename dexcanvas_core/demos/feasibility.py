@@ -9,7 +9,7 @@ The objects are the paper's (``dexcanvas_core.taxonomy``): small ones among them
 40, 30 and 20 mm, a 20 × 27 mm mini cylinder, a 10 mm rod — and a 150 × 150 × 20 mm plate.
 
 Hand capability bounds used below (estimates for an adult hand, stated once here; finger pads
-are ~15–19 mm thick, ``demos.hand``):
+are ~15–19 mm thick, ``mano.hand_model``):
 
 * pad-to-pad precision grasps span at most ~70 mm with two digits, ~90 mm with three or four and
   ~100 mm with five (maximum grip aperture in reach-to-grasp studies stays under ~110–120 mm;
@@ -45,8 +45,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 
-from dexcanvas_core.demos.geometry import object_geometry
-from dexcanvas_core.taxonomy import MANIPULATION_TYPES, OBJECTS, Pair
+from dexcanvas_core.objects.geometry import object_geometry
+from dexcanvas_core.taxonomy import GROUPS, MANIPULATION_TYPES, OBJECTS, Pair, object_spec
 
 
 @dataclass(frozen=True)
@@ -84,8 +84,6 @@ class ObjectTraits:
 
 def object_traits(object_id: str) -> ObjectTraits:
     """The :class:`ObjectTraits` of an object (a catalogue object, or one given by a mesh)."""
-    from dexcanvas_core.taxonomy import object_spec
-
     spec = object_spec(object_id)
     g = object_geometry(spec.id)
     hx, hy, hz = (2 * g.aabb_half).tolist()
@@ -322,8 +320,6 @@ def spread_pairs(pairs) -> list:
     object. Groups are then interleaved (power, intermediate, precision, in-hand, power, …).
     Returns every pair in that order; callers take the first ``n`` that work, per group quota.
     """
-    from dexcanvas_core.taxonomy import GROUPS
-
     by_group: dict[str, dict[str, list]] = {g: defaultdict(list) for g in GROUPS}
     for p in pairs:
         by_group[p.manipulation_type.group][p.manipulation_type.name].append(p)

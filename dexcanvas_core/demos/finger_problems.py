@@ -12,12 +12,12 @@ from dataclasses import replace
 import numpy as np
 
 from dexcanvas_core.demos.checks import closure_margin
-from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.demos.grasp import Grasp
 from dexcanvas_core.demos.grasp_problem import GraspWeights, HandObjectProblem
 from dexcanvas_core.demos.grasp_specs import GRASP_SPECS, ContactSpec
-from dexcanvas_core.demos.hand import HandModel
 from dexcanvas_core.keypoints import FINGERS
+from dexcanvas_core.mano.hand_model import HandModel
+from dexcanvas_core.objects.geometry import object_geometry
 
 
 def _fingers_only(prob: HandObjectProblem) -> HandObjectProblem:

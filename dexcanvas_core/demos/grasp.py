@@ -1,10 +1,10 @@
 """Grasp synthesis: a small optimisation on the hand skeleton, per manipulation type.
 
 For one (object, manipulation type, operator) the optimiser finds the wrist pose relative to the
-object and the 22 driven finger angles (:mod:`.hand`) such that the type's **contact parts**
-touch the object's surface and the hand does not penetrate the object or the table. It is a
-bounded nonlinear least-squares problem (Levenberg–Marquardt, :mod:`.optimize`; joint limits
-as bounds with a 2° margin; Jacobian by batched forward differences).
+object and the 22 driven finger angles (:mod:`dexcanvas_core.mano.hand_model`) such that the
+type's **contact parts** touch the object's surface and the hand does not penetrate the object or
+the table. It is a bounded nonlinear least-squares problem (Levenberg–Marquardt,
+:mod:`.optimize`; joint limits as bounds with a 2° margin; Jacobian by batched forward differences).
 
 Residuals (distances in metres, weights in ``GraspWeights``):
 
@@ -52,7 +52,6 @@ from functools import lru_cache
 import numpy as np
 
 from dexcanvas_core.demos.checks import closure_margin, lift_grip_ratio
-from dexcanvas_core.demos.geometry import ObjectGeometry, object_geometry
 from dexcanvas_core.demos.grasp_problem import (
     CLOSURE_MAX,
     CONTACT_TOL_M,
@@ -67,15 +66,17 @@ from dexcanvas_core.demos.grasp_problem import (
     _palm_centre,
 )
 from dexcanvas_core.demos.grasp_specs import GRASP_SPECS, Approach, ContactSpec, GraspSpec
-from dexcanvas_core.demos.hand import (
+from dexcanvas_core.errors import ValidationError
+from dexcanvas_core.mano.hand_model import (
     DOF_HIGH,
     DOF_LOW,
     N_DOF,
     HandModel,
     dof_index,
+    hand_model,
     rodrigues,
 )
-from dexcanvas_core.errors import ValidationError
+from dexcanvas_core.objects.geometry import ObjectGeometry, object_geometry
 
 log = logging.getLogger(__name__)
 
@@ -376,6 +377,4 @@ def _make_grasp(
 @lru_cache(maxsize=512)
 def cached_grasp(object_id: str, type_name: str, scale: float, seed: int) -> Grasp:
     """``solve_grasp`` memoised per (object, type, hand scale, seed)."""
-    from dexcanvas_core.demos.hand import hand_model
-
     return solve_grasp(object_id, type_name, hand_model(scale), seed=seed)

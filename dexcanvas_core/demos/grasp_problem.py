@@ -9,9 +9,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dexcanvas_core.demos.geometry import ObjectGeometry
 from dexcanvas_core.demos.grasp_specs import ContactSpec, GraspSpec
-from dexcanvas_core.demos.hand import (
+from dexcanvas_core.demos.optimize import least_squares_lm
+from dexcanvas_core.keypoints import FINGERS
+from dexcanvas_core.mano.hand_model import (
     CAPSULE_INDEX,
     CAPSULES,
     DOF_HIGH,
@@ -20,8 +21,7 @@ from dexcanvas_core.demos.hand import (
     HandModel,
     rodrigues,
 )
-from dexcanvas_core.demos.optimize import least_squares_lm
-from dexcanvas_core.keypoints import FINGERS
+from dexcanvas_core.objects.geometry import ObjectGeometry
 
 LIMIT_MARGIN = math.radians(2.0)
 """Margin [rad] kept from every anatomical limit by the optimiser's bounds."""

@@ -37,8 +37,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dexcanvas_core.demos.geometry import ObjectGeometry
-from dexcanvas_core.demos.hand import FINGER_DOF_INDEX, HandModel, rodrigues
 from dexcanvas_core.demos.timeline import (
     State,
     Timeline,
@@ -47,6 +45,8 @@ from dexcanvas_core.demos.timeline import (
     min_jerk,
     relaxed_posture,
 )
+from dexcanvas_core.mano.hand_model import FINGER_DOF_INDEX, HandModel, rodrigues
+from dexcanvas_core.objects.geometry import ObjectGeometry
 
 
 @dataclass

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dexcanvas_core.demos.hand import N_DOF, dof_index, rodrigues
+from dexcanvas_core.mano.hand_model import N_DOF, dof_index, rodrigues
 from dexcanvas_core.rotations import matrix_to_aa
 
 FPS = 120

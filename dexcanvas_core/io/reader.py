@@ -26,6 +26,7 @@ from dexcanvas_core.io.schema import (
     SCHEMA_VERSION_KEY,
     SUPPORTED_MAJOR,
 )
+from dexcanvas_core.taxonomy import manipulation_type
 from dexcanvas_core.trajectory import (
     Trajectory,
 )
@@ -228,8 +229,6 @@ class LanceTrajectories:
 
 def _gesture_name(g: Any) -> str:
     """Manipulation type name for a stored gesture value, or the value itself if unknown."""
-    from dexcanvas_core.taxonomy import manipulation_type
-
     try:
         return manipulation_type(g).name
     except DexCanvasError:  # a code the catalogue leaves open: reported as stored
@@ -254,6 +253,11 @@ def open_dataset(path: str | os.PathLike) -> LanceTrajectories:
         DatasetError: the path is missing, is not a Lance dataset, cannot be opened (corrupt or
             partially written), misses a required column, or names an unsupported contract major
             version.
+
+    >>> from dexcanvas_core import builtin_demonstration_path, open_dataset
+    >>> ds = open_dataset(builtin_demonstration_path("cube2/tripod"))
+    >>> len(ds) >= 1, ds.get(0).fps
+    (True, 120.0)
     """
     p = Path(path).expanduser()
     name = str(p)

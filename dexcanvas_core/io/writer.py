@@ -24,6 +24,7 @@ import pyarrow as pa
 
 from dexcanvas_core.errors import DatasetError
 from dexcanvas_core.io.encode import schema_for, trajectories_to_batch
+from dexcanvas_core.io.reader import open_dataset
 from dexcanvas_core.io.schema import SCHEMA_VERSION, SCHEMA_VERSION_KEY
 from dexcanvas_core.trajectory import Trajectory
 
@@ -167,8 +168,6 @@ def export_parquet(
 ) -> Path:
     """Copy a Lance dataset (optionally filtered) to one Parquet file, streaming and atomic."""
     import pyarrow.parquet as pq
-
-    from dexcanvas_core.io.reader import open_dataset
 
     ds = open_dataset(source)
     dest = Path(dest).expanduser()

@@ -95,6 +95,13 @@ def make_dataloader(
     the workers are started with ``spawn`` unless ``multiprocessing_context`` is given: Lance
     runs its own threads, which ``fork`` does not carry over safely. Further keyword arguments
     go to ``DataLoader`` as they are.
+
+    >>> from dexcanvas_core import DexCanvasDataset, builtin_demonstration_path, make_dataloader
+    >>> path = builtin_demonstration_path("cube2/tripod")
+    >>> ds = DexCanvasDataset(path, objects=["cube2"], manipulation_types=["tripod"])
+    >>> batch = next(iter(make_dataloader(ds, batch_size=1)))
+    >>> tuple(batch["finger_pose"].shape), tuple(batch["attention_mask"].shape)
+    ((1, 736, 45), (1, 736))
     """
     if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
         raise ValidationError(f"batch_size must be a positive int, got {batch_size!r}")

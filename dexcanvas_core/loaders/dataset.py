@@ -31,9 +31,11 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from dexcanvas_core import builtin
 from dexcanvas_core.errors import DexCanvasError, ValidationError
 from dexcanvas_core.io import LanceTrajectories, open_dataset
 from dexcanvas_core.loaders.selection import FilterValues, Selection, select_rows
+from dexcanvas_core.taxonomy import manipulation_type
 from dexcanvas_core.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -49,8 +51,6 @@ OPTIONAL_KEYS: tuple[str, ...] = ("joint_pos", "contact_force", "object_wrench")
 
 
 def _manipulation_name(gesture: str) -> str:
-    from dexcanvas_core.taxonomy import manipulation_type
-
     try:
         return manipulation_type(gesture).name
     except DexCanvasError:  # a code the catalogue leaves open: as stored
@@ -91,9 +91,7 @@ def trajectory_to_sample(traj: Trajectory) -> dict[str, Any]:
 
 
 def _default_path() -> str:
-    from dexcanvas_core.builtin import default_dataset_path
-
-    return str(default_dataset_path())
+    return str(builtin.default_dataset_path())  # looked up at call time (tests replace it)
 
 
 class DexCanvasDataset(Dataset):
@@ -122,6 +120,14 @@ class DexCanvasDataset(Dataset):
             message suggests close names).
         DatasetError: the path is not a readable dataset, or nothing matches the filters (the
             message lists the objects, types and operators the dataset contains).
+
+    One built-in demonstration (``DexCanvasDataset()`` reads the whole built-in set):
+
+    >>> from dexcanvas_core import DexCanvasDataset, builtin_demonstration_path
+    >>> path = builtin_demonstration_path("cube2/tripod")  # the pair's, or the whole set if built
+    >>> ds = DexCanvasDataset(path, objects=["cube2"], manipulation_types=["tripod"])
+    >>> len(ds), tuple(ds[0]["finger_pose"].shape)
+    (1, (736, 45))
     """
 
     def __init__(

@@ -99,6 +99,15 @@ class RLTrajectoryBuffer:
         max_trajectories: load at most the first this many trajectories of ``dataset``.
 
     All trajectories are loaded at construction (memory: total frames × field sizes).
+
+    >>> from dexcanvas_core import DexCanvasDataset, RLTrajectoryBuffer, builtin_demonstration_path
+    >>> path = builtin_demonstration_path("cube2/tripod")
+    >>> ds = DexCanvasDataset(path, objects=["cube2"], manipulation_types=["tripod"])
+    >>> buf = RLTrajectoryBuffer(ds, num_envs=2)
+    >>> tuple(buf.get_observations()["finger_pose"].shape)
+    (2, 45)
+    >>> buf.advance_timesteps().tolist()  # (E,) bool: which environments reached their end
+    [False, False]
     """
 
     def __init__(

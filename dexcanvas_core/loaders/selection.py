@@ -25,9 +25,11 @@ from typing import Any
 
 import numpy as np
 
+from dexcanvas_core.builtin import builtin_demonstration_path
+from dexcanvas_core.capture.importer import use_dataset_objects
 from dexcanvas_core.errors import DatasetError, DexCanvasError, UnknownNameError, ValidationError
-from dexcanvas_core.io import LanceTrajectories, build_filter
-from dexcanvas_core.taxonomy import manipulation_type, object_spec
+from dexcanvas_core.io import LanceTrajectories, build_filter, open_dataset
+from dexcanvas_core.taxonomy import Pair, manipulation_type, object_spec
 
 FilterValues = str | int | Iterable[str | int] | None
 """One name or code, several, or ``None`` (no filter)."""
@@ -241,18 +243,17 @@ def load_demonstration(pair, index: int = 0, dataset=None):
     """The ``index``-th demonstration (0-based) of ``pair`` (``"cube2/tripod"`` or a ``Pair``)
     in ``dataset`` (a DexCanvas-layout Lance path; ``None``: the built-in demonstration of
     ``pair``, built alone on first use when the whole built-in set is not built,
-    ``builtin.builtin_demonstration_path``)."""
-    from dexcanvas_core.io import open_dataset
-    from dexcanvas_core.taxonomy import Pair
+    ``builtin.builtin_demonstration_path``).
 
+    >>> from dexcanvas_core import load_demonstration
+    >>> traj = load_demonstration("cube2/tripod")
+    >>> traj.scene, traj.gesture, traj.fps
+    ('cube2', 'tripod', 120.0)
+    """
     if dataset is None:
-        from dexcanvas_core.builtin import builtin_demonstration_path
-
         pair = pair if isinstance(pair, Pair) else Pair.parse(pair)
         dataset = builtin_demonstration_path(pair)
     else:
-        from dexcanvas_core.capture.importer import use_dataset_objects
-
         use_dataset_objects(dataset)
         pair = pair if isinstance(pair, Pair) else Pair.parse(pair)
     ds = open_dataset(dataset)
@@ -309,9 +310,6 @@ def load_row(dataset, index: int = 0):
     Raises:
         DatasetError: no such row (the message gives the row count).
     """
-    from dexcanvas_core.capture.importer import use_dataset_objects
-    from dexcanvas_core.io import open_dataset
-
     use_dataset_objects(dataset)
     ds = open_dataset(dataset)
     n = len(ds)

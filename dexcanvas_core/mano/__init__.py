@@ -7,6 +7,9 @@
   model files, and a subject's bone lengths measured from DexCanvas ``mano_joint_pos``.
 * ``load_mano_model`` (``model_file.py``): reads the official pickles without chumpy.
 * ``axis_angle_to_matrix``, ``forward_kinematics`` (``kinematics.py``), ``mano_lbs`` (``lbs.py``).
+* ``HandModel``, ``hand_model`` (``hand_model.py``): batched numpy kinematics of 22 driven
+  anatomical angles and the capsule collision model (``CAPSULES``) that the demonstration
+  generator, the force pipeline and the viewers share.
 
 Keypoint orderings and converters live in ``dexcanvas_core.keypoints``.
 """

@@ -115,6 +115,12 @@ class ManoLayer(nn.Module):
         exact: ``True`` when the official model is used.
         skeleton: the ``HandSkeleton`` of the skeleton path (``None`` on the exact path).
         model: the loaded ``ManoModelData`` (``None`` on the skeleton path).
+
+    >>> import numpy as np
+    >>> from dexcanvas_core import ManoLayer
+    >>> out = ManoLayer().forward_numpy(hand_pose=np.zeros((1, 45)))  # the flat hand
+    >>> out.keypoints.shape, out.joints.shape
+    ((1, 21, 3), (1, 16, 3))
     """
 
     def __init__(

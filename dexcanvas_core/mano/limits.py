@@ -39,6 +39,7 @@ import numpy as np
 
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.keypoints import MANO21, MANO_JOINTS
+from dexcanvas_core.mano.skeleton import HandSkeleton
 
 ANGLE_NAMES: tuple[str, str, str] = ("flex", "abd", "twist")
 
@@ -76,8 +77,6 @@ HIGH = np.array([_limits_for(j)[1] for j in FINGER_JOINTS])
 @lru_cache(maxsize=2)
 def joint_frames(side: str = "right") -> np.ndarray:
     """(15, 3, 3): rows (flex, abd, twist) unit axes of each finger joint, template frame."""
-    from dexcanvas_core.mano.skeleton import HandSkeleton
-
     if side not in ("right", "left"):
         raise ValidationError(f"side must be 'right' or 'left', got {side!r}", field="side")
     # Built on the right hand; the left frames are their mirror images (see below).

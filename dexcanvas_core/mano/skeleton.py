@@ -205,6 +205,11 @@ class HandSkeleton:
     Posing (done by ``ManoLayer``): joint frames rotate about the rest joints exactly as in MANO;
     each tip is carried rigidly by its distal joint (``tip = p3 + R3 @ tip_offset``), so the tip
     lies along the distal bone's rest direction at the distal bone's length.
+
+    >>> from dexcanvas_core import HandSkeleton
+    >>> skeleton = HandSkeleton.default("right")
+    >>> skeleton.rest_keypoints.shape, skeleton.side
+    ((21, 3), 'right')
     """
 
     rest_keypoints: np.ndarray

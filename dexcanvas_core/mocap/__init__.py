@@ -5,13 +5,15 @@
 * ``stream``: ``MarkerStream``, labelled markers as a mocap system delivers them;
 * ``render``: ``render_markers``, the stream of a demonstration with noise, dropouts, occlusion
   gaps and label swaps;
-* ``readers`` / ``writers``: C3D (``ezc3d``) and CSV files, the marker-name mapping file;
+* ``readers`` / ``writers``: C3D (``ezc3d``) and CSV files; ``mapping``: the marker-name mapping
+  file;
 * ``rigid``: weighted Kabsch and robust object registration;
 * ``calibrate``: subject calibration (hand size or bone lengths, marker offsets);
 * ``model`` / ``fit``: the marker model and the batched Levenberg–Marquardt hand fit;
 * ``gaps``: gap filling and low-pass filtering of marker trajectories;
 * ``pipeline``: ``fit_markers`` (markers → ``Trajectory`` + per-frame flags) and ``run_fit``
-  (``dexcanvas fit MARKERS --out PATH``).
+  (``dexcanvas fit MARKERS --out PATH``); its settings in ``options`` (``FitOptions``), its
+  stages (object, hand) in ``stages``, its results in ``results`` (``FitFlags``, ``MocapFit``).
 """
 
 from dexcanvas_core.mocap.calibrate import (
@@ -35,31 +37,22 @@ from dexcanvas_core.mocap.layout import (
     object_marker_positions,
     object_marker_table,
 )
+from dexcanvas_core.mocap.mapping import MarkerFileError, MarkerMapping, load_mapping
 from dexcanvas_core.mocap.model import HandMarkerModel
-from dexcanvas_core.mocap.pipeline import (
+from dexcanvas_core.mocap.options import FitOptions
+from dexcanvas_core.mocap.pipeline import FitConfig, FitReport, fit_markers, run_fit
+from dexcanvas_core.mocap.readers import read_c3d, read_csv, read_markers
+from dexcanvas_core.mocap.render import render_markers
+from dexcanvas_core.mocap.results import (
     FIT_INFO_COLUMN,
     FIT_QUALITY_COLUMN,
-    FitConfig,
     FitFlags,
-    FitOptions,
-    FitReport,
-    MarkerDataError,
     MocapFit,
     fit_flags,
-    fit_markers,
-    run_fit,
 )
-from dexcanvas_core.mocap.readers import (
-    MarkerFileError,
-    MarkerMapping,
-    load_mapping,
-    read_c3d,
-    read_csv,
-    read_markers,
-)
-from dexcanvas_core.mocap.render import render_markers
 from dexcanvas_core.mocap.rigid import ObjectRegistration, kabsch, register_object
 from dexcanvas_core.mocap.sequence import fit_sequence
+from dexcanvas_core.mocap.stages import MarkerDataError
 from dexcanvas_core.mocap.stream import MarkerStream, MarkerTruth
 from dexcanvas_core.mocap.writers import write_c3d, write_csv
 

@@ -43,6 +43,7 @@ from dexcanvas_core.mocap.layout import (
     HAND_MARKER_NAMES,
     hand_marker_offsets,
     hand_marker_parents,
+    hand_marker_rest_positions,
 )
 from dexcanvas_core.mocap.model import N_PARAMS, HandMarkerModel, NormalEquations
 from dexcanvas_core.mocap.sequence import fit_sequence
@@ -400,7 +401,6 @@ def palm_scale(obs: np.ndarray, side: str = "right") -> float:
     """Hand size relative to MANO's mean hand from the palm markers' mutual distances
     (``obs``: ``(T, 14, 3)`` hand markers [m]; median over frames and marker pairs)."""
     rest = HandSkeleton.default(side).rest_keypoints
-    from dexcanvas_core.mocap.layout import hand_marker_rest_positions
 
     P = hand_marker_rest_positions(rest, side)[:4]
     ratios = []

@@ -78,6 +78,7 @@ import numpy as np
 
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.keypoints import MANO21, MANO_JOINTS
+from dexcanvas_core.taxonomy import OBJECTS, object_spec
 
 # -- hand --------------------------------------------------------------------------------------
 
@@ -287,8 +288,6 @@ def _distance_gap(p: np.ndarray) -> float:
 
 @cache
 def _object_markers(object_id: str) -> tuple[tuple[float, float, float], ...]:
-    from dexcanvas_core.taxonomy import object_spec
-
     spec = object_spec(object_id)
     half = np.array(spec.bounding_box_m) / 2.0
     best: tuple[float, np.ndarray] | None = None
@@ -315,15 +314,11 @@ def object_marker_positions(object_id: str) -> np.ndarray:
     Raises:
         UnknownNameError: ``object_id`` is not in the catalogue.
     """
-    from dexcanvas_core.taxonomy import object_spec
-
     return np.array(_object_markers(object_spec(object_id).id))
 
 
 def object_marker_table() -> dict[str, np.ndarray]:
     """Object id → ``(4, 3)`` marker positions [m] for the whole catalogue."""
-    from dexcanvas_core.taxonomy import OBJECTS
-
     return {oid: object_marker_positions(oid) for oid in OBJECTS}
 
 

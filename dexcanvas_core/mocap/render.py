@@ -27,7 +27,7 @@ import logging
 import numpy as np
 import torch
 
-from dexcanvas_core.errors import ValidationError
+from dexcanvas_core.errors import UnknownNameError, ValidationError
 from dexcanvas_core.mano.skeleton import BETA0_SCALE_PER_UNIT, HandSkeleton, measure_bone_lengths
 from dexcanvas_core.mocap.frames import MocapFrame
 from dexcanvas_core.mocap.layout import (
@@ -40,6 +40,7 @@ from dexcanvas_core.mocap.layout import (
 from dexcanvas_core.mocap.model import HandMarkerModel
 from dexcanvas_core.mocap.stream import MarkerStream, MarkerTruth
 from dexcanvas_core.rotations import aa_to_matrix
+from dexcanvas_core.taxonomy import object_spec
 from dexcanvas_core.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -90,8 +91,6 @@ def clean_markers_world(
     parts = [hand]
     if traj.objects:
         obj = traj.object
-        from dexcanvas_core.errors import UnknownNameError
-        from dexcanvas_core.taxonomy import object_spec
 
         for candidate in (obj.name, traj.scene):
             try:

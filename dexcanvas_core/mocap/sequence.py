@@ -13,8 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dexcanvas_core.mano.limits import pose_from_anatomical
 from dexcanvas_core.mocap.fit import HandFitter, SolveStats
 from dexcanvas_core.mocap.model import N_PARAMS, HandMarkerModel
+from dexcanvas_core.mocap.rigid import kabsch
+from dexcanvas_core.rotations import matrix_to_aa, slerp_aa
 
 log = logging.getLogger(__name__)
 
@@ -26,8 +29,6 @@ def interpolate_params(times: np.ndarray, known: np.ndarray, x_known: np.ndarray
     """``(T, 51)`` parameters at every frame from those at frames ``known`` (sorted indices):
     global orientation by slerp, translation and finger axis-angles linearly; frames outside
     the known range hold the nearest known value."""
-    from dexcanvas_core.rotations import slerp_aa
-
     T = times.shape[0]
     out = np.empty((T, x_known.shape[1]))
     tk = times[known]
@@ -46,9 +47,6 @@ def root_from_markers(
     Returns ``(x_root (T, 6), ok (T,))``: global orientation and translation (MANO's
     ``global_orient``, ``transl``), and whether ≥ 3 palm markers were seen.
     """
-    from dexcanvas_core.mocap.rigid import kabsch
-    from dexcanvas_core.rotations import matrix_to_aa
-
     idx = model.root_idx.numpy()
     J0 = model.rest_keypoints[0]
     rest = J0 + model.offsets.numpy()[idx]
@@ -79,8 +77,6 @@ class SequenceFit:
 
 def _half_closed_pose(side: str) -> np.ndarray:
     """``(45,)`` a half-closed hand (second cold start of the key frames)."""
-    from dexcanvas_core.mano.limits import pose_from_anatomical
-
     a = np.zeros((15, 3))
     for f in range(4):
         a[3 * f : 3 * f + 3, 0] = (0.6, 0.8, 0.5)

@@ -12,13 +12,14 @@ the mesh's content hash (a second run reads the cache, it does not decompose aga
 
 * **Convex parts.** MuJoCo collides a mesh geom through its convex hull, so a convex mesh is used
   as it is, and a non-convex one (a bowl, a clamp, scissors, a mug) is first split into convex
-  parts by approximate convex decomposition (``coacd``, Wei et al. 2022).
+  parts by approximate convex decomposition (``coacd``, Wei et al. 2022), each part decimated
+  to ``MAX_HULL_VERTICES`` vertices (:func:`convex_parts`).
 * **A signed-distance grid** of the union of those parts (the shape physics collides with):
   distances [m] on a regular grid around the object, negative inside, with each node's nearest
   triangle: a query takes the nearest of its cell's candidate triangles (exact up to which
   triangles are tried), the sign "inside some convex part", the normal along the closest point.
 
-The parts are built in :mod:`.parts`, the distance in :mod:`.sdf`.
+A part is a :class:`.parts.ConvexPart`, the distance is in :mod:`.sdf`.
 """
 
 from __future__ import annotations
@@ -32,9 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
-from dexcanvas_core.builtin import cache_dir
+from dexcanvas_core.cache import cache_dir
 from dexcanvas_core.errors import MissingDependencyError, ValidationError
-from dexcanvas_core.objects.parts import ConvexPart, convex_parts
+from dexcanvas_core.objects.parts import ConvexPart
 from dexcanvas_core.objects.sdf import SdfGrid
 
 log = logging.getLogger(__name__)
@@ -50,6 +51,13 @@ MAX_EXTENT_M = 1.0
 
 CACHE_VERSION = 3
 """Bumped when the cached decomposition or grid changes meaning."""
+
+COACD_THRESHOLD = 0.04
+"""``coacd`` concavity threshold: the largest concavity a part may keep, relative to the mesh's
+size (smaller: more, tighter parts)."""
+
+MAX_HULL_VERTICES = 64
+"""Vertices per convex part kept for physics (``coacd``'s ``max_ch_vertex``)."""
 
 
 @dataclass(frozen=True)
@@ -179,6 +187,32 @@ class MeshCollision:
     sdf: SdfGrid
     cached: bool = False
     """True when read from the disk cache rather than computed."""
+
+
+def convex_parts(mesh: ObjectMesh) -> list[ConvexPart]:
+    """The mesh's collision shape as convex parts: its hull if convex, else ``coacd``'s parts."""
+    if mesh.convex:
+        return [ConvexPart.from_points(mesh.vertices)]
+    try:
+        import coacd
+    except ImportError as e:  # pragma: no cover - a declared dependency
+        raise MissingDependencyError("coacd", "non-convex mesh objects") from e
+    coacd.set_log_level("error")
+    parts = coacd.run_coacd(
+        coacd.Mesh(mesh.vertices, mesh.faces),
+        threshold=COACD_THRESHOLD,
+        decimate=True,  # each part at most MAX_HULL_VERTICES vertices
+        max_ch_vertex=MAX_HULL_VERTICES,
+        seed=0,
+    )
+    out = []
+    for verts, _faces in parts:
+        verts = np.asarray(verts, dtype=np.float64)
+        if len(verts) >= 4 and np.linalg.matrix_rank(verts - verts.mean(0), tol=1e-7) == 3:
+            out.append(ConvexPart.from_points(verts))
+    if not out:
+        raise ValidationError(f"object mesh {mesh.source!r}: convex decomposition found no solid")
+    return out
 
 
 def mesh_cache_dir() -> Path:

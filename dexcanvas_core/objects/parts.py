@@ -1,29 +1,14 @@
-"""An object's collision shape as convex parts (MuJoCo collides a mesh through its convex hull):
-a convex mesh is its own hull, a non-convex one is split by approximate convex decomposition
-(``coacd``, Wei et al. 2022), each part decimated to ``MAX_HULL_VERTICES`` vertices.
+"""A convex part of an object's collision shape (MuJoCo collides a mesh through its convex hull):
+its hull triangles and face planes, volume and centroid. A mesh is split into such parts by
+:func:`dexcanvas_core.objects.mesh.convex_parts`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import ConvexHull
-
-from dexcanvas_core.errors import MissingDependencyError, ValidationError
-
-if TYPE_CHECKING:
-    from dexcanvas_core.objects.mesh import ObjectMesh
-
-
-COACD_THRESHOLD = 0.04
-"""``coacd`` concavity threshold: the largest concavity a part may keep, relative to the mesh's
-size (smaller: more, tighter parts)."""
-
-MAX_HULL_VERTICES = 64
-"""Vertices per convex part kept for physics (``coacd``'s ``max_ch_vertex``)."""
-
 
 # -- convex parts ---------------------------------------------------------------------------------
 
@@ -77,29 +62,3 @@ class ConvexPart:
         p = self.planes.copy()
         p[:, 3] *= factor
         return ConvexPart(self.vertices * factor, self.faces, p)
-
-
-def convex_parts(mesh: ObjectMesh) -> list[ConvexPart]:
-    """The mesh's collision shape as convex parts: its hull if convex, else ``coacd``'s parts."""
-    if mesh.convex:
-        return [ConvexPart.from_points(mesh.vertices)]
-    try:
-        import coacd
-    except ImportError as e:  # pragma: no cover - a declared dependency
-        raise MissingDependencyError("coacd", "non-convex mesh objects") from e
-    coacd.set_log_level("error")
-    parts = coacd.run_coacd(
-        coacd.Mesh(mesh.vertices, mesh.faces),
-        threshold=COACD_THRESHOLD,
-        decimate=True,  # each part at most MAX_HULL_VERTICES vertices
-        max_ch_vertex=MAX_HULL_VERTICES,
-        seed=0,
-    )
-    out = []
-    for verts, _faces in parts:
-        verts = np.asarray(verts, dtype=np.float64)
-        if len(verts) >= 4 and np.linalg.matrix_rank(verts - verts.mean(0), tol=1e-7) == 3:
-            out.append(ConvexPart.from_points(verts))
-    if not out:
-        raise ValidationError(f"object mesh {mesh.source!r}: convex decomposition found no solid")
-    return out

@@ -17,9 +17,10 @@ surface stops it (the "squeeze", ``Δq = K⁻¹ Jᵀ f``):
   otherwise the larger of the two, the earlier model, under which a heavy object got barely more
   than a light one: 4.6 vs 4 N per pad for ``cylinder1h``/``cylinder1``). ``w`` ∈ [0, 1] ramps
   with the pad's distance to the surface (``grip_weights``) and is smoothed in time;
-* ``λ`` ∈ [0, 1] (:func:`carried_load`) is the share of the weight the hand carries: 0 while the
-  reference object rests on the table, 1 once it is lifted, built up ahead of lift-off (grip
-  force–load force coupling: people raise the grip *before* the object leaves the table).
+* ``λ`` ∈ [0, 1] (:func:`~dexcanvas_core.sim.physics.carried_load`) is the share of the weight
+  the hand carries: 0 while the reference object rests on the table, 1 once it is lifted,
+  built up ahead of lift-off (grip force–load force coupling: people raise the grip *before*
+  the object leaves the table).
   Without it the first finger to reach a resting object got the whole weight-sized force
   (``n_fingers`` = 1, 14 N for a 0.47 kg cylinder) and pushed or tipped the object before the
   others arrived — the lift-off drops of heavy objects on the force-pipeline benchmark;
@@ -40,9 +41,7 @@ import numpy as np
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.keypoints import FINGERS
 from dexcanvas_core.sim.hand import FINGER_HINGES, HAND_JOINTS
-from dexcanvas_core.table import DEFAULT_TABLE, Table
-
-GRAVITY = 9.81
+from dexcanvas_core.sim.physics import GRAVITY
 
 
 def finger_columns() -> list[np.ndarray]:
@@ -175,56 +174,6 @@ def contact_keeping_force(
             field="grip_force_floor_n",
         )
     return float(np.clip(weight_k * mass_kg * GRAVITY, floor_n, force_n))
-
-
-def carried_load(
-    geometry,
-    object_pos: np.ndarray,
-    object_quat: np.ndarray,
-    fps: float,
-    *,
-    clear_m: tuple[float, float] = (0.001, 0.004),
-    lead_s: float = 0.2,
-    table: Table = DEFAULT_TABLE,
-) -> np.ndarray:
-    """``(T,)`` share ``λ`` ∈ [0, 1] of the object's weight the hand carries in the reference.
-
-    ``λ`` ramps from 0 to 1 as the reference object's lowest point rises from ``clear_m[0]`` to
-    ``clear_m[1]`` above the table top (1 where the object's origin is beyond the table's
-    edges: nothing else holds it there), is then brought forward by ``lead_s`` (the largest
-    value over the next ``lead_s`` seconds) and ramped in over ``lead_s / 2`` (moving average),
-    so that the grip is built up before lift-off and released after set-down.
-
-    Args:
-        geometry: the object's ``ObjectGeometry`` (``lowest_z``).
-        object_pos, object_quat: ``(T, 3)`` [m], ``(T, 4)`` (w, x, y, z) reference object pose.
-        fps: frame rate [Hz]; clear_m: clearance ramp [m]; lead_s: anticipation [s].
-        table: the table (default :data:`~dexcanvas_core.table.DEFAULT_TABLE`).
-    """
-    from scipy.spatial.transform import Rotation
-
-    p = np.asarray(object_pos, dtype=np.float64)
-    q = np.asarray(object_quat, dtype=np.float64)
-    lo, hi = clear_m
-    if not (0.0 <= lo < hi) or lead_s < 0.0:
-        raise ValidationError(
-            f"clearance ramp must satisfy 0 ≤ lo < hi and lead ≥ 0, got {clear_m}, {lead_s}",
-            field="clear_m",
-        )
-    R = Rotation.from_quat(q, scalar_first=True).as_matrix()
-    low = np.asarray(geometry.lowest_z(R, p), dtype=np.float64)
-    h = table.height_above(np.concatenate([p[..., :2], low[..., None]], axis=-1))
-    lam = np.clip((h - lo) / (hi - lo), 0.0, 1.0)
-    n = round(lead_s * fps)
-    T = lam.shape[0]
-    if n > 0 and T > 1:
-        pad = np.concatenate([lam, np.full(n, lam[-1])])
-        lam = np.max(np.lib.stride_tricks.sliding_window_view(pad, n + 1)[:T], axis=1)
-        k = max(1, n // 2)
-        if k > 1:  # ramp in: a moving average ending at each frame (never later than lam)
-            pad = np.concatenate([np.full(k - 1, lam[0]), lam])
-            lam = np.convolve(pad, np.ones(k) / k, mode="valid")
-    return np.clip(lam, 0.0, 1.0)
 
 
 def _closest_on_axis(scene, d, g, s, R_o, p_o) -> tuple[np.ndarray, np.ndarray]:

@@ -20,7 +20,7 @@ with the identity orientation). The palm body's origin is the wrist joint J0.
 
 Every hinge and slide has a position actuator with a force limit: 51 actuators.
 
-**Geometry.** One capsule per bone of :data:`dexcanvas_core.demos.hand.CAPSULES` (the same
+**Geometry.** One capsule per bone of :data:`dexcanvas_core.mano.hand_model.CAPSULES` (the same
 collision model the demonstrations were generated and checked with), radii scaled with the
 hand's size, density 1.1 g/cm³; fingertip sites at the five tip keypoints. Contact parts (the
 DexCanvas ``joint_name`` values) are kept per geom in :attr:`SimHand.geom_part`.
@@ -44,9 +44,9 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from dexcanvas_core.demos.hand import CAPSULES
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.keypoints import FINGERS, MANO21, MANO_JOINTS
+from dexcanvas_core.mano.hand_model import CAPSULES
 from dexcanvas_core.mano.limits import ANGLE_NAMES, FINGER_JOINTS, HIGH, LOW, joint_frames
 from dexcanvas_core.mano.skeleton import HandSkeleton
 

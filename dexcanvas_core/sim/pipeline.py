@@ -31,13 +31,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from dexcanvas_core.demos.geometry import ObjectGeometry, object_geometry
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.mano.skeleton import HandSkeleton
+from dexcanvas_core.objects.geometry import ObjectGeometry, object_geometry
 from dexcanvas_core.sim.diagnosis import failure_diagnosis, wrist_rotations
 from dexcanvas_core.sim.forces import contacts_from_frames, finger_force_series
 from dexcanvas_core.sim.hand import FINGER_HINGES, urdf_dof_26
 from dexcanvas_core.sim.mpc import MPCConfig, OpenLoop, ResidualTracker, SamplingMPC, track
+from dexcanvas_core.sim.physics import GRAVITY, capture_acceleration, smoothed
 from dexcanvas_core.sim.reference import (
     Reference,
     build_reference,
@@ -46,13 +47,11 @@ from dexcanvas_core.sim.reference import (
 )
 from dexcanvas_core.sim.resize import adapt_reference_to_size
 from dexcanvas_core.sim.scene import PhysicsSettings, SimScene, build_scene
-from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S, moving_average
 from dexcanvas_core.sim.support import hold_until_frame
 from dexcanvas_core.sim.tracker import TrackingConfig, TrackingEnv
 from dexcanvas_core.table import table_of
 from dexcanvas_core.trajectory import FORCE_GROUPS, Trajectory
 
-GRAVITY = 9.81
 TRACKERS = ("mpc", "open_loop")
 
 
@@ -192,19 +191,6 @@ def simulate(
     return res
 
 
-def _moving_average(x: np.ndarray, fps: float, window_s: float = CAPTURE_SMOOTH_S) -> np.ndarray:
-    return moving_average(x, max(1, round(window_s * fps)))
-
-
-def capture_acceleration(pos: np.ndarray, fps: float) -> np.ndarray:
-    """``(T, 3)`` captured object acceleration [m/s²]: central differences of the smoothed
-    position track."""
-    pos = _moving_average(pos, fps)
-    acc = np.zeros_like(pos)
-    acc[1:-1] = (pos[2:] - 2 * pos[1:-1] + pos[:-2]) * fps**2
-    return acc
-
-
 def _median_or_none(x: np.ndarray) -> float | None:
     return float(np.median(x)) if x.size else None
 
@@ -231,7 +217,7 @@ def _result(traj, cfg, geometry, ref, scene, env, log, cpu_s) -> SimResult:
     a_cap = capture_acceleration(ref.object_pos, fps)[:T]
     F_ext = wrench[:, :3] + table[:, :3] + m * g
     ne_sim = np.linalg.norm(F_ext - m * a_sim, axis=1) / mg
-    ne_cap = np.linalg.norm(_moving_average(F_ext, fps) - m * a_cap, axis=1) / mg
+    ne_cap = np.linalg.norm(smoothed(F_ext, fps) - m * a_cap, axis=1) / mg
     finger = finger_force_series(log.contacts, scene)
     gap = scene.support_gap(np.asarray(log.object_pos), np.asarray(log.object_quat))
     off_table = (gap > 0.01) & (np.linalg.norm(table[:, :3], axis=1) < 1e-6)

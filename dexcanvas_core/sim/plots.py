@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from dexcanvas_core.errors import MissingDependencyError
+from dexcanvas_core.sim.physics import GRAVITY
 from dexcanvas_core.trajectory import FORCE_GROUPS
 
 FINGER_COLOURS = {
@@ -39,7 +40,7 @@ def plot_finger_forces(result, path: str | Path, title: str = "") -> Path:
     F = np.linalg.norm(result.finger_force, axis=2)  # (T, 6)
     fps = result.metrics["fps"]
     t = np.arange(F.shape[0]) / fps
-    mg = result.metrics["mass_kg"] * 9.81
+    mg = result.metrics["mass_kg"] * GRAVITY
     fig, (ax, ax2) = plt.subplots(
         2, 1, figsize=(8, 5), sharex=True, gridspec_kw={"height_ratios": [3, 1]}
     )

@@ -23,13 +23,11 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dexcanvas_core.errors import ValidationError
-from dexcanvas_core.keypoints import FINGERS, MANO21
+from dexcanvas_core.keypoints import FINGERS, FINGERTIPS_MANO21, MANO21
 from dexcanvas_core.mano.skeleton import HandSkeleton, measure_bone_lengths
 from dexcanvas_core.rotations import aa_to_matrix
 from dexcanvas_core.sim.hand import clip_to_limits, mano_to_joint_angles
 from dexcanvas_core.trajectory import Trajectory
-
-_TIP_ROWS = np.array([MANO21.index(f"{f}_tip") for f in FINGERS])
 
 
 @dataclass
@@ -122,7 +120,7 @@ def build_reference(
     kp = None if hand.joint_pos is None else hand.joint_pos.astype(np.float64)
     if kp is not None:
         R_o = aa_to_matrix(obj.rot_aa.astype(np.float64))
-        tips_obj = np.einsum("tji,tkj->tki", R_o, kp[:, _TIP_ROWS] - obj.pos[:, None, :])
+        tips_obj = np.einsum("tji,tkj->tki", R_o, kp[:, FINGERTIPS_MANO21] - obj.pos[:, None, :])
         tip_d = geometry.signed_distance(tips_obj.reshape(-1, 3)).reshape(-1, len(FINGERS))
     else:
         tip_d = np.full((traj.num_frames, len(FINGERS)), np.inf)

@@ -63,14 +63,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dexcanvas_core.errors import ValidationError
-from dexcanvas_core.keypoints import FINGERS, MANO21
+from dexcanvas_core.keypoints import FINGERS, FINGERTIPS_MANO21, MANO21
 from dexcanvas_core.mano.skeleton import HandSkeleton
 from dexcanvas_core.sim.hand import HAND_JOINTS, HINGE_HIGH, HINGE_LOW, add_hand
 from dexcanvas_core.sim.reference import Reference
 
 log = logging.getLogger(__name__)
-
-_TIP_ROWS = np.array([MANO21.index(f"{f}_tip") for f in FINGERS])
 
 
 @dataclass(frozen=True)
@@ -355,7 +353,9 @@ def _with_pose(ref: Reference, q: np.ndarray, kp_shift, geometry, R_o) -> Refere
     kp, tips_obj, tip_d = ref.keypoints, ref.tips_object, ref.tip_distance
     if kp is not None:
         kp = kp + kp_shift
-        tips_obj = np.einsum("tji,tkj->tki", R_o, kp[:, _TIP_ROWS] - ref.object_pos[:, None, :])
+        tips_obj = np.einsum(
+            "tji,tkj->tki", R_o, kp[:, FINGERTIPS_MANO21] - ref.object_pos[:, None, :]
+        )
         tip_d = geometry.signed_distance(tips_obj.reshape(-1, 3)).reshape(-1, len(FINGERS))
     return dataclasses.replace(
         ref,

@@ -22,9 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-from dexcanvas_core.errors import DatasetError
+from dexcanvas_core.errors import DatasetError, MissingDependencyError, UnknownNameError
+from dexcanvas_core.io import open_dataset, write_dataset
+from dexcanvas_core.loaders.selection import load_demonstration, load_row, subject_of
 from dexcanvas_core.sim.pipeline import SimConfig, simulate
-from dexcanvas_core.sim.synthesis import PerturbationRanges
+from dexcanvas_core.sim.plots import plot_finger_forces
+from dexcanvas_core.sim.synthesis import PerturbationRanges, synthesize_one
+from dexcanvas_core.taxonomy import object_spec
 
 
 def _atomic_write_text(path: Path, text: str) -> None:
@@ -59,9 +63,6 @@ def run_simulate(cfg: SimulateConfig) -> dict:
     """Track one demonstration, write the dataset, metrics and plot; return the metrics."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
-    from dexcanvas_core.io import write_dataset
-    from dexcanvas_core.loaders.selection import load_demonstration, load_row, subject_of
-
     out = Path(cfg.out)
     _check_out(out, cfg.overwrite)
     cfg.sim.validate()
@@ -90,9 +91,6 @@ def run_simulate(cfg: SimulateConfig) -> dict:
         json.dumps(metrics, indent=2, sort_keys=True, default=float),
     )
     if cfg.plot:
-        from dexcanvas_core.errors import MissingDependencyError
-        from dexcanvas_core.sim.plots import plot_finger_forces
-
         try:
             plot_finger_forces(res, out.with_name(out.name + ".forces.png"), title=label)
         except MissingDependencyError as e:  # the data is written; only the picture is missing
@@ -174,9 +172,6 @@ class SynthesizeConfig:
 
 def _synth_row(args) -> tuple[str, int, list[dict]]:
     """Worker: all rollouts of one source row, checkpointed as ``work/<uuid>.lance``."""
-    from dexcanvas_core.io import open_dataset, write_dataset
-    from dexcanvas_core.sim.synthesis import synthesize_one
-
     dataset, position, expand, seed, sim_cfg, ranges, work = args
     traj = open_dataset(dataset).take([position])[0]
     kept, reports = [], []
@@ -197,9 +192,6 @@ def _synth_row(args) -> tuple[str, int, list[dict]]:
 def check_objects_known(object_ids, dataset: str) -> None:
     """Stop before any work when rows name objects that neither the catalogue nor the objects
     in use (``--objects``, ``--objects-dir``) know, naming them and how to supply them."""
-    from dexcanvas_core.errors import UnknownNameError
-    from dexcanvas_core.taxonomy import object_spec
-
     unknown = []
     for oid in sorted(object_ids):
         try:
@@ -218,8 +210,6 @@ def check_objects_known(object_ids, dataset: str) -> None:
 def run_synthesize(cfg: SynthesizeConfig) -> dict:
     """Expand ``dataset`` ``expand``× (module docstring); return a summary."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
-
-    from dexcanvas_core.io import open_dataset, write_dataset
 
     if cfg.expand < 1:
         raise DatasetError("--expand must be at least 1")

@@ -3,7 +3,8 @@
 The table is a box of finite extent (:class:`dexcanvas_core.table.Table`; the trajectory's own,
 else the default), not an infinite plane.
 
-Objects are built from their primitive composition (``dexcanvas_core.demos.object_geometry``):
+Objects are built from their primitive composition
+(``dexcanvas_core.objects.geometry.object_geometry``):
 primitives exactly, YCB items as the documented primitive compositions of that module, one
 geom per primitive with the catalogue mass spread over them by volume. The robot side
 (``retarget.scene``) builds its scenes with the same :func:`add_object` and :func:`add_table`.
@@ -23,6 +24,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dexcanvas_core.errors import ValidationError
+from dexcanvas_core.keypoints import FINGERS
 from dexcanvas_core.mano.skeleton import HandSkeleton
 from dexcanvas_core.rotations import aa_to_quat_wxyz
 from dexcanvas_core.sim.hand import SimHand, add_hand
@@ -295,7 +297,6 @@ def build_scene(
     add_object(spec, geometry, mocap=False, friction=tuple(fr), mass_kg=mass_kg)
     add_object_hold(spec)
     # fingertip positions in the object frame (the tracker's contact-keeping reward)
-    from dexcanvas_core.keypoints import FINGERS
 
     for f in FINGERS:
         spec.add_sensor(

@@ -30,6 +30,8 @@ from scipy.spatial.transform import Rotation
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.keypoints import MANO21
 from dexcanvas_core.sim.hand import FINGER_HINGES, joint_angles_to_mano
+from dexcanvas_core.sim.pipeline import simulate
+from dexcanvas_core.sim.reference import body_keypoints
 from dexcanvas_core.trajectory import HandTrack, ObjectTrack, Trajectory
 
 _NS = uuidlib.UUID("6f1c3d52-2b7e-4a51-9a0e-5d1f3c7e8b90")
@@ -139,8 +141,6 @@ def apply_pose_perturbation(traj: Trajectory, p: Perturbation) -> Trajectory:
 
 def simulated_tracks(result, scene, ref) -> tuple[HandTrack, ObjectTrack]:
     """Hand and object tracks of a rollout, from the simulation (module docstring)."""
-    from dexcanvas_core.sim.reference import body_keypoints
-
     tr = result.trajectory
     qpos = np.asarray(result.hand_qpos)
     T = qpos.shape[0]
@@ -172,8 +172,6 @@ def simulated_tracks(result, scene, ref) -> tuple[HandTrack, ObjectTrack]:
 def synthesize_one(traj: Trajectory, index: int, seed: int, cfg, ranges: PerturbationRanges):
     """One perturbed rollout of ``traj``: ``(trajectory or None, metrics)``; the trajectory is
     ``None`` when the rollout failed (it is not kept)."""
-    from dexcanvas_core.sim.pipeline import simulate
-
     if traj.is_generated and traj.seed_uuid and traj.extras.get("synthesis"):
         raise ValidationError(
             f"row {traj.uuid} is itself a synthesized rollout; synthesize from source rows",

@@ -19,8 +19,8 @@ The reward (the DexCanvas paper's) per frame is ``exp(-60·pos_err) + exp(-10·r
 **Trackers** (:mod:`dexcanvas_core.sim.mpc`) implement ``ResidualTracker`` (``reset(env)``,
 ``act(env) -> a``): the zero-residual ``OpenLoop``, and ``SamplingMPC`` (predictive sampling
 with a softmax over the best samples, parallel rollouts with ``mujoco.rollout``). A learned
-residual policy (the paper's per-pair PPO) plugs in the same way: it reads
-``env.observation()`` and returns ``a``; the scene, the reference and the force code do not change.
+residual policy (the paper's per-pair PPO) plugs in the same way: it reads ``env.observation()``
+and returns ``a``; the scene, the reference and the force code do not change.
 """
 
 from __future__ import annotations
@@ -40,8 +40,9 @@ from dexcanvas_core.sim.forces import (
     finish_frame,
     read_contacts,
 )
-from dexcanvas_core.sim.grip import carried_load, contact_keeping_force, squeeze_offsets
+from dexcanvas_core.sim.grip import contact_keeping_force, squeeze_offsets
 from dexcanvas_core.sim.hand import FINGER_HINGES, HAND_JOINTS
+from dexcanvas_core.sim.physics import carried_load
 from dexcanvas_core.sim.reference import Reference
 from dexcanvas_core.sim.signal import moving_average
 from dexcanvas_core.table import DEFAULT_TABLE
@@ -79,7 +80,7 @@ class TrackingConfig:
     grip_safety: float = 3.0
     """Grip force per finger: carry this many times the object's weight by friction."""
     grip_load_lead_s: float | None = 0.2
-    """Grip force–load coupling (:func:`~dexcanvas_core.sim.grip.carried_load`): the
+    """Grip force–load coupling (:func:`~dexcanvas_core.sim.physics.carried_load`): the
     weight-sized part of the grip force applies only while the reference object is off the
     table, built up this long [s] before lift-off (``F_min`` alone while it rests there);
     ``None``: the weight-sized force whenever a finger is near the object (the earlier model,

@@ -286,6 +286,10 @@ def manipulation_type(name_or_code: str | int | ManipulationType) -> Manipulatio
         UnknownNameError: unknown name or code; the message suggests close matches.
         ValidationError: a value that is neither a string nor an int, or a release label whose
             code and name disagree.
+
+    >>> from dexcanvas_core import manipulation_type
+    >>> manipulation_type("001-Palmar-Pinch").name, manipulation_type(1).name
+    ('palmar_pinch', 'palmar_pinch')
     """
     if isinstance(name_or_code, ManipulationType):
         return name_or_code

@@ -34,6 +34,13 @@ def object_spec(object_id: str | ObjectSpec) -> ObjectSpec:
     Raises:
         UnknownNameError: unknown object; the message suggests close matches.
         ValidationError: ``object_id`` is not a string.
+
+    >>> from dexcanvas_core import object_spec
+    >>> spec = object_spec("Cube 2")
+    >>> spec.id, spec.size_m, spec.mass_kg
+    ('cube2', (0.05,), 0.037)
+    >>> object_spec("cube2h").mass_kg  # the heavy duplicate
+    0.123
     """
     if isinstance(object_id, ObjectSpec):
         return object_id

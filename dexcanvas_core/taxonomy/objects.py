@@ -20,7 +20,7 @@ field: ``paper`` (the table) or ``estimate, <reason>`` where the table gives a d
 * **Sizes, masses and the heavy set** are the paper's for every primitive and heavy duplicate.
 * **YCB-style items have no size in the paper** (their geometry is the released object models).
   Until such a model is given, each is approximated by a built-in primitive composition
-  (``dexcanvas_core.demos.geometry``; ``ObjectSpec.approximate``). Their ``size_m`` is an
+  (``dexcanvas_core.objects.geometry``; ``ObjectSpec.approximate``). Their ``size_m`` is an
   estimate: the bounding box of the DexRobot collision mesh of the item, as published in
   ``MindLab-Research/mint-vla-client-example``, ``scripts/state56_native28_geometry_contract.json``
   (``half_extents`` × 2, rounded to 1 mm, in that mesh's axes, marker mounts included); for
@@ -106,7 +106,7 @@ class ObjectSpec:
             starts with ``estimate`` and gives its reason.
         aliases: other accepted spellings; lookups also ignore case and separators.
         mesh: path of the object's mesh file (its frame is the object frame), or ``None`` for
-            the built-in geometry (``dexcanvas_core.demos.object_geometry``).
+            the built-in geometry (``dexcanvas_core.objects.geometry.object_geometry``).
         mesh_scale: metres per mesh unit.
         friction: sliding friction coefficient of the surface, or ``None`` for the scene's.
         inertia_diag: principal moments [kg·m²] about the centre of mass, or ``None``
@@ -192,7 +192,7 @@ class ObjectSpec:
     @property
     def approximate(self) -> bool:
         """True when the object's geometry is the built-in primitive composition of
-        ``dexcanvas_core.demos.geometry`` standing in for the real object: a YCB-style item
+        ``dexcanvas_core.objects.geometry`` standing in for the real object: a YCB-style item
         whose model was not given (``--objects-dir``, a manifest)."""
         return self.source == "ycb" and self.mesh is None
 

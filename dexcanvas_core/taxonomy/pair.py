@@ -19,6 +19,11 @@ class Pair:
 
     ``str(pair)`` gives the canonical spelling ``"<object id>/<type name>"``, which
     :meth:`parse` reads back.
+
+    >>> from dexcanvas_core import Pair
+    >>> pair = Pair.parse("Cube 2/Tripod")
+    >>> str(pair), pair.object.id, pair.manipulation_type.name
+    ('cube2/tripod', 'cube2', 'tripod')
     """
 
     object: ObjectSpec

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dexcanvas_core.demos.hand import CAPSULES, SAMPLE_SPACING
+from dexcanvas_core.mano.hand_model import CAPSULES, SAMPLE_SPACING
 from dexcanvas_core.rotations import aa_to_matrix
 from dexcanvas_core.trajectory import CONTACT_PARTS, FORCE_GROUPS, Contacts, Trajectory, part_group
 
@@ -128,8 +128,8 @@ def infer_contacts(traj: Trajectory, geometry, tol_m: float = INFER_TOLERANCE_M)
     """Contacts of a demonstration that has no contact records, from its keypoints alone.
 
     The hand is the capsule model of the demonstration generator
-    (``dexcanvas_core.demos.hand.CAPSULES``: one capsule per phalanx, five for the palm, default
-    hand size); a capsule touches the object where its surface is within ``tol_m`` of the
+    (``dexcanvas_core.mano.hand_model.CAPSULES``: one capsule per phalanx, five for the palm,
+    default hand size); a capsule touches the object where its surface is within ``tol_m`` of the
     object's. The contact point is the object-surface point nearest the capsule's closest axis
     sample; there is no force (zero vectors).
     """

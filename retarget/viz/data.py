@@ -19,9 +19,9 @@ import numpy as np
 
 from dexcanvas_core.builtin import builtin_demonstration_path
 from dexcanvas_core.capture import use_dataset_objects
-from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.io import open_dataset
 from dexcanvas_core.loaders.selection import select_rows
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.table import DEFAULT_TABLE, Table, table_of
 from dexcanvas_core.taxonomy import Pair
 from dexcanvas_core.trajectory import Trajectory

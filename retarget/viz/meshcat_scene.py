@@ -31,7 +31,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from dexcanvas_core.demos.geometry import object_geometry
+from dexcanvas_core.objects.geometry import object_geometry
 from retarget.hands import get_hand
 from retarget.viz import style
 from retarget.viz.contacts import ContactFrames

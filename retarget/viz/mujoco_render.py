@@ -20,7 +20,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from dexcanvas_core.demos.geometry import object_geometry
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.rotations import aa_to_quat_wxyz
 from retarget.viz import style
 from retarget.viz.meshcat_geoms import drawn_geoms

@@ -21,8 +21,8 @@ from typing import Literal
 
 import numpy as np
 
-from dexcanvas_core.demos.geometry import object_geometry
 from dexcanvas_core.errors import DexCanvasError
+from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S
 from retarget.force_scores import REACH_M
 from retarget.hands import get_hand

@@ -30,7 +30,7 @@ from typing import Literal
 
 import numpy as np
 
-from dexcanvas_core.demos.geometry import object_geometry
+from dexcanvas_core.objects.geometry import object_geometry
 from retarget.hands import get_hand
 from retarget.loading import load_subject
 from retarget.pipeline import RunConfig, check_pair

@@ -69,6 +69,7 @@ from dexcanvas_core.capture.formats._common import (
     ups_for,
     valid_runs,
 )
+from dexcanvas_core.capture.formats.dexycb import DEXYCB_FPS
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.keypoints import convert_keypoints
 from dexcanvas_core.rotations import aa_to_quat_wxyz
@@ -80,9 +81,6 @@ FORMAT = "ho3d"
 
 HO3D_FPS = 30.0
 """Frame rate assumed for HO-3D sequences [Hz] (the release states none)."""
-
-DEXYCB_FPS = 30.0
-"""DexYCB's frame rate [Hz]."""
 
 LAYOUTS = ("auto", "ho3d", "dexycb-export")
 

@@ -1,6 +1,6 @@
 """Solid primitives posed in an object frame, with their exact signed distances.
 
-Sizes follow MuJoCo's conventions (half sizes, see ``dexcanvas_core.demos.geometry``); a
+Sizes follow MuJoCo's conventions (half sizes, see ``dexcanvas_core.objects.geometry``); a
 ``"mesh"`` primitive is a convex part of a mesh object (``dexcanvas_core.objects.mesh``).
 """
 
@@ -20,6 +20,10 @@ PrimitiveType = Literal["box", "cylinder", "sphere", "capsule", "mesh"]
 PRIMITIVE_TYPES: tuple[str, ...] = ("box", "cylinder", "sphere", "capsule", "mesh")
 _SIZE_LEN = {"box": 3, "cylinder": 2, "sphere": 1, "capsule": 2, "mesh": 3}
 _EPS = 1e-12
+
+Y90: tuple[float, float, float] = (0.0, math.pi / 2, 0.0)
+"""Axis-angle [rad] of a quarter turn about y: turns a primitive's z axis onto the object's x axis
+(a lying cylinder or capsule)."""
 
 
 @dataclass(frozen=True)

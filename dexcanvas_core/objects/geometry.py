@@ -40,11 +40,11 @@ from pathlib import Path
 
 import numpy as np
 
-from dexcanvas_core.demos.primitives import Primitive, sdf_local
-from dexcanvas_core.demos.ycb_shapes import YCB_BUILDERS
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.objects.mesh import ObjectMesh, load_object_mesh, mesh_collision
+from dexcanvas_core.objects.primitives import Y90, Primitive, sdf_local
 from dexcanvas_core.objects.sdf import SdfGrid
+from dexcanvas_core.objects.ycb_shapes import YCB_BUILDERS
 from dexcanvas_core.rotations import aa_to_matrix
 from dexcanvas_core.taxonomy import ObjectSpec, object_spec
 
@@ -71,6 +71,14 @@ class ObjectGeometry:
             uniform density.
         approximate: the shape stands in for a real object (a built-in composition of a
             YCB-style item, not its model).
+
+    Signed distances [m] of points given in the object frame (negative inside):
+
+    >>> import numpy as np
+    >>> from dexcanvas_core import object_geometry
+    >>> cube = object_geometry("cube2")  # a 5 cm cube centred on its frame's origin
+    >>> cube.signed_distance(np.array([[0.0, 0.0, 0.1], [0.0, 0.0, 0.0]])).round(3).tolist()
+    [0.075, -0.025]
     """
 
     object_id: str
@@ -275,9 +283,6 @@ def _centred(prims: list[Primitive]) -> tuple[tuple[Primitive, ...], float]:
     return out, float(0.5 * (hi - lo)[2])
 
 
-_Y90 = (0.0, math.pi / 2, 0.0)  # turns a primitive's z axis onto the object's x axis
-
-
 def _primitive_composition(spec: ObjectSpec) -> tuple[list[Primitive], str]:
     """A primitive object as one MuJoCo-style primitive in the object frame (z up as the first
     placement rests it; a lying cylinder's axis along x), and its description."""
@@ -295,7 +300,7 @@ def _primitive_composition(spec: ObjectSpec) -> tuple[list[Primitive], str]:
     d, h = s
     if spec.lying:
         return (
-            [Primitive("cylinder", (d / 2, h / 2), rot_aa=_Y90, name="cylinder")],
+            [Primitive("cylinder", (d / 2, h / 2), rot_aa=Y90, name="cylinder")],
             f"cylinder Ø {d * 1e3:.0f} × {h * 1e3:.0f} mm lying on its side, axis along x",
         )
     return (
@@ -389,5 +394,10 @@ def object_geometry(object_id: str | ObjectSpec) -> ObjectGeometry:
     Raises:
         UnknownNameError: unknown object (the message lists close matches).
         ValidationError: the object's mesh cannot be used (unreadable, open, absurd scale).
+
+    >>> from dexcanvas_core import object_geometry
+    >>> geom = object_geometry("Cube 2")
+    >>> geom.object_id, geom.mass_kg, [p.type for p in geom.primitives]
+    ('cube2', 0.037, ['box'])
     """
     return _build(object_spec(object_id))

@@ -1,4 +1,5 @@
-"""The hand for demonstrations: fast batched kinematics and a capsule collision model.
+"""The MANO hand as the demonstration generator and the force pipeline use it: fast batched
+kinematics and a capsule collision model.
 
 Kinematics are those of :class:`~dexcanvas_core.mano.ManoLayer` on the skeleton path (same tree,
 same axis-angle semantics, tested against it), re-implemented in batched numpy because the grasp
@@ -176,6 +177,14 @@ class HandModel:
     Args:
         skeleton: the operator's ``HandSkeleton`` (right side).
         scale: hand size relative to the default skeleton (scales the capsule radii).
+
+    >>> import numpy as np
+    >>> from dexcanvas_core import HandModel, HandSkeleton
+    >>> hand = HandModel(HandSkeleton.default("right"))
+    >>> q = np.zeros((1, 22))  # the driven angles (DOF_NAMES) [rad]
+    >>> kp, R_joint = hand.forward(q, np.eye(3)[None], np.zeros((1, 3)))
+    >>> kp.shape, R_joint.shape, len(hand.capsule_radius)
+    ((1, 21, 3), (1, 16, 3, 3), 21)
     """
 
     def __init__(self, skeleton: HandSkeleton, scale: float = 1.0):
@@ -295,5 +304,10 @@ class HandModel:
 
 @lru_cache(maxsize=16)
 def hand_model(scale: float) -> HandModel:
-    """The (cached) hand model of a default skeleton scaled by ``scale`` about its wrist."""
+    """The (cached) hand model of a default skeleton scaled by ``scale`` about its wrist.
+
+    >>> from dexcanvas_core import hand_model
+    >>> hand_model(1.07) is hand_model(1.07), hand_model(1.07).scale
+    (True, 1.07)
+    """
     return HandModel(HandSkeleton.default("right").scaled(scale), scale)

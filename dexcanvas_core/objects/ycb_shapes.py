@@ -12,10 +12,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from dexcanvas_core.demos.primitives import Primitive
+from dexcanvas_core.objects.primitives import Y90, Primitive
 from dexcanvas_core.rotations import aa_to_matrix, matrix_to_aa
-
-_Y90 = (0.0, math.pi / 2, 0.0)  # turns a primitive's z axis onto the object's x axis
 
 # -- YCB-style compositions --------------------------------------------------------------------
 # Each returns (primitives, description). Dimensions in metres. They approximate the items'
@@ -44,7 +42,7 @@ def _banana() -> tuple[list[Primitive], str]:
     mid_h = 0.045  # half length of the middle segment's cylinder
     end_h = 0.025  # half length of each end segment's cylinder
     tilt = math.radians(28)
-    prims = [Primitive("capsule", (r, mid_h), (0, 0, 0), _Y90, name="middle")]
+    prims = [Primitive("capsule", (r, mid_h), (0, 0, 0), Y90, name="middle")]
     for side in (-1.0, 1.0):
         # end segments continue from the middle segment's ends, bending towards +y
         cx = side * (mid_h + end_h * math.cos(tilt))
@@ -52,7 +50,7 @@ def _banana() -> tuple[list[Primitive], str]:
         # rotation: z → (side·cos(tilt), sin(tilt), 0), a rotation about z after the Y90 turn
         ang = side * tilt
         Rz = aa_to_matrix(np.array([0.0, 0.0, ang]))
-        R = Rz @ aa_to_matrix(np.array(_Y90))
+        R = Rz @ aa_to_matrix(np.array(Y90))
         prims.append(
             Primitive("capsule", (r, end_h), (cx, cy, 0.0), tuple(matrix_to_aa(R)), name="end")
         )
@@ -99,7 +97,7 @@ def _clamp() -> tuple[list[Primitive], str]:
     prims = [Primitive("box", (0.035, 0.022, t), (0.065, 0.0, 0.0), name="jaws")]
     for side in (-1.0, 1.0):
         ang = side * math.radians(10)
-        R = aa_to_matrix(np.array([0.0, 0.0, ang])) @ aa_to_matrix(np.array(_Y90))
+        R = aa_to_matrix(np.array([0.0, 0.0, ang])) @ aa_to_matrix(np.array(Y90))
         prims.append(
             Primitive(
                 "capsule",
@@ -121,10 +119,8 @@ def _pitcher() -> tuple[list[Primitive], str]:
     prims = [
         Primitive("cylinder", (R_body, H / 2), (0, 0, H / 2), name="body"),
         Primitive("capsule", (0.011, 0.055), (R_body + 0.032, 0, 0.14), name="handle"),
-        Primitive("capsule", (0.010, 0.016), (R_body + 0.014, 0, 0.196), _Y90, name="handle_top"),
-        Primitive(
-            "capsule", (0.010, 0.016), (R_body + 0.014, 0, 0.084), _Y90, name="handle_bottom"
-        ),
+        Primitive("capsule", (0.010, 0.016), (R_body + 0.014, 0, 0.196), Y90, name="handle_top"),
+        Primitive("capsule", (0.010, 0.016), (R_body + 0.014, 0, 0.084), Y90, name="handle_bottom"),
     ]
     return prims, (
         "pitcher standing upright: a Ø 108 × 235 mm body cylinder and a handle on its far "
@@ -148,8 +144,8 @@ def _drill() -> tuple[list[Primitive], str]:
             tuple(matrix_to_aa(Rh)),
             name="handle",
         ),
-        Primitive("cylinder", (0.031, 0.075), (0.035, 0, 0.166), _Y90, name="body"),
-        Primitive("cylinder", (0.016, 0.015), (0.125, 0, 0.166), _Y90, name="chuck"),
+        Primitive("cylinder", (0.031, 0.075), (0.035, 0, 0.166), Y90, name="body"),
+        Primitive("cylinder", (0.016, 0.015), (0.125, 0, 0.166), Y90, name="chuck"),
     ]
     return prims, (
         "cordless drill standing on its battery: a battery block 116 × 67 × 48 mm, a handle "
@@ -174,7 +170,7 @@ def _scissors() -> tuple[list[Primitive], str]:
             dx, dy = x1 - x0, y1 - y0
             L = math.hypot(dx, dy)
             ang = math.atan2(dy, dx)
-            R = aa_to_matrix(np.array([0.0, 0.0, ang])) @ aa_to_matrix(np.array(_Y90))
+            R = aa_to_matrix(np.array([0.0, 0.0, ang])) @ aa_to_matrix(np.array(Y90))
             prims.append(
                 Primitive(
                     "capsule",
@@ -188,7 +184,7 @@ def _scissors() -> tuple[list[Primitive], str]:
     ring(-0.045, 0.024, 0.021, 0.018, 10, "thumb_loop")  # hole ≈ 28 × 22 mm
     ring(-0.050, -0.030, 0.030, 0.019, 12, "finger_loop")  # hole ≈ 46 × 24 mm
     for y in (0.012, -0.012):
-        prims.append(Primitive("capsule", (0.005, 0.012), (-0.006, y, 0.0), _Y90, name="shank"))
+        prims.append(Primitive("capsule", (0.005, 0.012), (-0.006, y, 0.0), Y90, name="shank"))
     return prims, (
         "scissors lying flat: blades 110 × 18 × 6 mm, a thumb loop (hole ≈ 28 × 22 mm) and a "
         "finger loop for two fingers (hole ≈ 46 × 24 mm) made of capsules of radius 7 mm "
