@@ -9,8 +9,8 @@ stays cheap):
 
 >>> import retarget
 >>> hand = retarget.get_hand("allegro")
->>> hand.name, len(hand.fingers)
-('allegro', 4)
+>>> hand.name, hand.mapped_human_fingers
+('allegro', ('thumb', 'index', 'middle', 'ring'))
 
 One demonstration end to end, in memory (``retarget run`` adds the files and the summary):
 
@@ -46,7 +46,7 @@ _EXPORTS = {
     "ForceCalibrationConfig": "retarget.force_calibration",
     "calibrate_forces": "retarget.force_calibration",
     "RefineConfig": "retarget.refine",
-    "refine": "retarget.refine",
+    "refine_lost": "retarget.pipeline",
     # the pipeline and its outputs
     "RunConfig": "retarget.pipeline",
     "PipelineResult": "retarget.pipeline",

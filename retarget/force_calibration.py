@@ -41,12 +41,14 @@ from retarget.force_scores import correlation_means, finger_force_profiles
 
 @dataclass(frozen=True)
 class ForceCalibrationConfig:
-    iterations: int = 10
-    """Corrected iterates after the input commands' re-simulation (each costs one).
+    """Settings of the force calibration (module doc).
 
     >>> ForceCalibrationConfig(iterations=4).validate().iterations
     4
     """
+
+    iterations: int = 10
+    """Corrected iterates after the input commands' re-simulation (each costs one)."""
     gain: float = 0.5
     """Share ``g`` of each frame's force error corrected per iterate."""
     smooth_s: float = 0.075

@@ -10,7 +10,7 @@ from typing import Literal
 import numpy as np
 
 from dexcanvas_core.rotations import aa_to_matrix, aa_to_quat_wxyz
-from dexcanvas_core.sim.physics import capture_acceleration, carried_load
+from dexcanvas_core.sim.physics import GRAVITY, capture_acceleration, carried_load
 from dexcanvas_core.table import DEFAULT_TABLE
 from dexcanvas_core.trajectory import FORCE_GROUPS, Trajectory
 from retarget._checks import check_choice, check_range
@@ -83,7 +83,7 @@ class GripAssembly:
         )  # fmt: skip
         acc = capture_acceleration(p, traj.fps)
         W = np.zeros((T, 6))
-        W[:, :3] = (load * self.geometry.mass_kg)[:, None] * (acc + np.array([0.0, 0.0, 9.81]))
+        W[:, :3] = (load * self.geometry.mass_kg)[:, None] * (acc + np.array([0.0, 0.0, GRAVITY]))
         return {
             "mode": "grip",
             "kp": kp,

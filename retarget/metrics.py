@@ -178,7 +178,8 @@ def contact_error_per_finger(contact_err: np.ndarray, fingers: list[str]) -> dic
 
 
 def run_metrics(result: PipelineResult, cfg: RunConfig) -> dict:
-    """``metrics.json`` of a run: what ran (hand, pair, dataset, options), the re-simulation's
+    """``metrics.json`` of a run: what ran (hand, pair, the options of ``result``'s retargeting
+    config; ``cfg``: the dataset, time scale and ``--set`` overrides), the re-simulation's
     object tracking (``ValidationResult.metrics``), the kinematic errors, and with force
     matching the force scores, the calibration, the human replay; with a refinement its
     metrics (``refine``, ``success_refined``).
@@ -192,6 +193,7 @@ def run_metrics(result: PipelineResult, cfg: RunConfig) -> dict:
     (True, 30, 200.0)
     """
     robot, sim, traj, rt = result.robot, result.sim, result.trajectory, result.retargeter
+    forces = rt.cfg.force_matching.enabled
     pair = result.subject
     kin_pen = (
         float(max(0.0, -np.min(robot.min_distance)))
@@ -205,7 +207,7 @@ def run_metrics(result: PipelineResult, cfg: RunConfig) -> dict:
         "pair": str(pair),
         "uuid": traj.uuid,
         "dataset": str(cfg.dataset) if cfg.dataset else "built-in",
-        "backend": cfg.backend,
+        "backend": rt.cfg.solver.backend,
         "frames": traj.num_frames,
         "fps": traj.fps,
         "time_scale": float(cfg.time_scale),
@@ -226,10 +228,10 @@ def run_metrics(result: PipelineResult, cfg: RunConfig) -> dict:
         "object": object_record(pair.object.id),
         "approximate_object": bool(result.geometry.approximate),
         "table": table_of(traj).to_dict(),
-        "forces": cfg.forces,
-        "force_scale": cfg.force_scale if cfg.forces else None,
+        "forces": forces,
+        "force_scale": rt.cfg.force_matching.scale if forces else None,
     }
-    if cfg.forces:
+    if forces:
         metrics.update(force_metrics(robot, sim, traj, rt))
         metrics["human_force_pipeline"] = result.human_sim
         if (rp := result.replay) is not None:
@@ -241,6 +243,6 @@ def run_metrics(result: PipelineResult, cfg: RunConfig) -> dict:
     if (refined := result.refined) is not None:
         metrics["refine"] = refined.metrics()
         metrics["success_refined"] = refined.success
-        if cfg.forces:
+        if forces:
             metrics["refine"]["forces"] = refined_force_metrics(robot, refined, traj, rt)
     return metrics

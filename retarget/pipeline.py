@@ -346,7 +346,15 @@ def refine_lost(
     """The physics refinement (:func:`retarget.refine.refine`) of a run whose re-simulation
     lost the object, with ``config`` (:func:`refine_config`); force-calibrated
     (``calibrate_iterations`` replays, 0: none) when the run force-matches and the refinement
-    kept the object."""
+    kept the object.
+
+    >>> from dexcanvas_core import load_demonstration
+    >>> human = load_demonstration("cube2/tripod").slice(0, 20)
+    >>> result = retarget_demonstration(human, "cube2/tripod", "shadow")
+    >>> replayed = refine_lost(result, refine_config(False, tracker="open_loop"))
+    >>> replayed.success, replayed.ctrl.shape[0]
+    (True, 20)
+    """
     hand, rt, traj, robot = result.hand, result.retargeter, result.trajectory, result.robot
     task = _task(progress, "refining (MPC on the robot)", 1)
     refined = refine(hand, result.geometry, traj, robot, rt.tip_sites, config)

@@ -33,13 +33,15 @@ from retarget.refine_scene import finger_forces, human_fingers, tracking_env
 
 @dataclass(frozen=True)
 class RefineConfig:
-    tracker: str = "mpc"
-    """``mpc``, or ``open_loop`` (the retargeted commands replayed in the same scene: the
-    baseline the refinement is measured against).
+    """Settings of the physics refinement (module doc).
 
     >>> RefineConfig(retries=2).retries
     2
     """
+
+    tracker: str = "mpc"
+    """``mpc``, or ``open_loop`` (the retargeted commands replayed in the same scene: the
+    baseline the refinement is measured against)."""
     mpc: MPCConfig = field(default_factory=MPCConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     scale_pos_m: float = 0.03

@@ -19,7 +19,7 @@ class RobotTrajectory:
     >>> human = load_demonstration("cube2/tripod").slice(0, 10)
     >>> robot = retarget_keypoints(get_hand("leap"), human.hand.joint_pos, fps=120.0)
     >>> robot.joint_names[:3], robot.keypoint_err.shape
-    (['wrist_x', 'wrist_y', 'wrist_z'], (10,))
+    (['wrist_tx', 'wrist_ty', 'wrist_tz'], (10,))
     """
 
     hand: str

@@ -1,7 +1,8 @@
-"""The docstring examples of the public API (``dexcanvas_core.__all__``) run and pass.
+"""The docstring examples of the public API (``dexcanvas_core.__all__``, ``retarget.__all__``)
+run and pass.
 
-Every exported name carries an example, and every module defining one has at least one example
-that doctest runs, so these tests cannot pass vacuously."""
+Every exported name carries an example in its own docstring, and every module defining one has
+at least one example that doctest runs, so these tests cannot pass vacuously."""
 
 from __future__ import annotations
 
@@ -12,14 +13,20 @@ import inspect
 import pytest
 
 import dexcanvas_core
+import retarget
 
-EXPORTS = [n for n in dexcanvas_core.__all__ if n != "__version__"]
-MODULES = sorted({"dexcanvas_core", *(dexcanvas_core._EXPORTS[n] for n in EXPORTS)})
+PACKAGES = (dexcanvas_core, retarget)
+EXPORTS = [(pkg.__name__, n) for pkg in PACKAGES for n in pkg.__all__ if n not in ("__version__",)]
+MODULES = sorted(
+    {pkg.__name__ for pkg in PACKAGES}
+    | {getattr(importlib.import_module(p), n).__module__ for p, n in EXPORTS}
+)
 
 
-@pytest.mark.parametrize("name", EXPORTS)
-def test_every_export_has_an_example(name):
-    assert ">>>" in (inspect.getdoc(getattr(dexcanvas_core, name)) or ""), name
+@pytest.mark.parametrize(("package", "name"), EXPORTS, ids=[f"{p}.{n}" for p, n in EXPORTS])
+def test_every_export_has_an_example(package, name):
+    obj = getattr(importlib.import_module(package), name)
+    assert ">>>" in (inspect.getdoc(obj) or ""), f"{package}.{name} has no example"
 
 
 @pytest.mark.parametrize("module", MODULES)

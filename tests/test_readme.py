@@ -26,7 +26,8 @@ def test_readme_python_example_runs_and_gives_what_it_says():
     result, metrics, tips, obs, done = (ns[k] for k in ("result", "metrics", "tips", "obs", "done"))
     T = result.trajectory.num_frames
     assert T == 100 and result.robot.q_command.shape == (T, result.robot.q.shape[1])
-    assert result.human_sim is not None and result.calibration is not None  # forces ran
+    assert result.human_sim is not None, "the force pipeline simulated the human's forces"
+    assert result.calibration is not None, "the commands were force-calibrated"
     assert metrics["forces"] and metrics["frames"] == T
     assert tips.shape[0] == T and tips.shape[2] == 3 and np.isfinite(tips.numpy()).all()
     assert done.shape == (1024,) and all(v.shape[0] == 1024 for v in obs.values())
