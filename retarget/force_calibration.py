@@ -37,6 +37,7 @@ from dexcanvas_core.sim.signal import moving_average
 from retarget.errors import RetargetError
 from retarget.force_matching import servo_gains, squeeze_offsets
 from retarget.force_scores import correlation_means, finger_force_profiles
+from retarget.limits.coupling import CouplingLimit, servo_follower_map
 
 
 @dataclass(frozen=True)
@@ -196,8 +197,6 @@ def correction(
     and ``C`` the servoed finger joints' follower map (``servo_follower_map``; the wrist's
     columns zero). ``model``: a scene whose first ``nq`` ``qpos`` are the hand's joints.
     ``target``, ``realized``: (T, F, 3) [N] forces on the object, ``tip_sites`` order."""
-    from retarget.limits.coupling import CouplingLimit, servo_follower_map
-
     T, F = target.shape[:2]
     if realized.shape != target.shape or q.shape != (T, nq) or len(tip_sites) != F:
         raise RetargetError(

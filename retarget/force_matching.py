@@ -26,8 +26,10 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from dexcanvas_core.rotations import tangent_basis
 from retarget._checks import check_range
 from retarget.errors import RetargetError
+from retarget.qp import QPProblem, QPSolveError, solve_qp
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -54,17 +56,6 @@ class ForceMatchingConfig:
         check_range(self, "scale", positive=True)
         check_range(self, "tangent_weight")
         check_range(self, "idle_contact_clearance", optional=True, upper=0.02, unit="m")
-
-
-def tangent_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit tangents of the unit normal ``n``: ``t₁ = n × a / ‖n × a‖`` (``a`` a world axis
-    away from ``n``) and ``t₂ = n × t₁`` (scalar cross products: ``np.cross`` costs ~25 µs a
-    call). Shared by the force QP's cones and the contact term's surface frames."""
-    x, y, z = float(n[0]), float(n[1]), float(n[2])
-    t1 = np.array([0.0, z, -y]) if abs(x) < 0.9 else np.array([-z, 0.0, x])  # n × x̂, n × ŷ
-    t1 /= np.sqrt(t1 @ t1)
-    a, b, c = t1
-    return t1, np.array([y * c - z * b, z * a - x * c, x * b - y * a])
 
 
 def grasp_matrix(points: np.ndarray, center: np.ndarray) -> np.ndarray:
@@ -128,8 +119,6 @@ def distribute(
             in N·m are small numbers; ``w_torque`` puts them on the forces' scale).
         f_max: bound on each force component [N] (keeps the QP bounded).
     """
-    from retarget.qp import QPProblem, QPSolveError, solve_qp
-
     P_ = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     N_ = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     F_ = np.asarray(f_desired, dtype=np.float64).reshape(-1, 3)

@@ -9,9 +9,9 @@ from typing import Literal
 import mujoco
 import numpy as np
 
+from dexcanvas_core.rotations import tangent_basis
 from retarget._checks import check_choice, check_range
 from retarget.errors import RetargetError
-from retarget.force_matching import tangent_basis
 from retarget.objectives._kernels import surface_gram, weighted_gram
 from retarget.objectives.base import Objective
 from retarget.objectives.link_distance import link_distance
