@@ -20,7 +20,7 @@ Measured per run:
   N times, the two methods alternating (ours, dex-retargeting, ours, …; the outputs are the
   first run's, every repeat computes the same): ms/frame is the median of the N, and the
   minimum is reported beside it. On this shared 2-core machine the same run of the same code
-  measured 0.72 and 1.30 ms/frame a minute apart (Shadow, 20 pairs, 2026-12-06), so one run's
+  measured 0.72 and 1.30 ms/frame a minute apart (Shadow, 20 pairs), so one run's
   number is a sample, not the cost.
 * **kp err** — mean over frames of the mean distance between the robot keypoint sites and their
   scaled human targets (``Retargeter.human_targets``), both methods through

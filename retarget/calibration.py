@@ -23,16 +23,15 @@ result goes in the hand module as ``HandModel.wrist_offset``; with
 ``RetargetConfig.wrist.use_offset`` on, ``Retargeter.human_targets`` aims the wrist at the
 human wrist pose composed with it.
 
-Measured with ``benchmarks/retarget_speed_quality.py --hands shadow allegro leap inspire
-ability svh --n-pairs 20`` (operator1, seed 0; 2026-12-02 without, 2026-12-03 with the
-offsets of 12 calibration pairs), keypoint error and strict re-simulation success without →
-with: Shadow 10.41 → 10.31 mm (65 → 65 %), Allegro 19.09 → 18.53 mm (30 → 25 %), LEAP 19.13
-→ 18.91 mm (65 → 50 %), Inspire 20.15 → 17.76 mm (35 → 25 %), Ability 15.62 → 14.19 mm (30
-→ 40 %), SVH 16.49 → 15.05 mm (45 → 45 %); all six 16.8 → 15.8 mm (dex-retargeting 14.9),
-45 → 42 % strict (dex-retargeting 13 %). The wrist rotation weight 0 instead (Inspire,
-Ability, SVH): 17.87 / 14.02 / 13.90 mm, Inspire's strict success 35 → 25 %. On by default
-(``wrist.use_offset``) since 2026-12-03: all 7 hands at 5e2fe8e, 19.54 → 18.61 mm keypoint
-error, 40 → 39 % strict; Allegro's hold of the heavy built-in cube with force matching
+Measured with ``python -m benchmarks.retarget_speed_quality --hands shadow allegro leap inspire
+ability svh --n-pairs 20`` (operator1, seed 0; without and with the offsets of 12 calibration
+pairs), keypoint error and strict re-simulation success without → with: Shadow 10.41 → 10.31 mm
+(65 → 65 %), Allegro 19.09 → 18.53 mm (30 → 25 %), LEAP 19.13 → 18.91 mm (65 → 50 %), Inspire
+20.15 → 17.76 mm (35 → 25 %), Ability 15.62 → 14.19 mm (30 → 40 %), SVH 16.49 → 15.05 mm (45 →
+45 %); all six 16.8 → 15.8 mm (dex-retargeting 14.9), 45 → 42 % strict (dex-retargeting 13 %).
+The wrist rotation weight 0 instead (Inspire, Ability, SVH): 17.87 / 14.02 / 13.90 mm, Inspire's
+strict success 35 → 25 %. On by default (``wrist.use_offset``): all 7 hands 19.54 → 18.61 mm
+keypoint error, 40 → 39 % strict; Allegro's hold of the heavy built-in cube with force matching
 (``retarget run --hand allegro --pair cube2H/tripod --forces``) needs Allegro's joint limit
 margin with it (``HandModel.joint_limit_margin``; without it the cube drops, 12.1 cm).
 

@@ -104,7 +104,7 @@ HAND = HandModel(
     joint_damping=DAMPING,
     joint_frictionloss=0.0,
     default_posture={},  # MCP 0 (PIP 0.72 by the coupling: finger straight), thumb 0
-    # Measured: `retarget calibrate-wrist --hand ability --pairs 12` (2026-12-03); the
+    # Measured: `retarget calibrate-wrist --hand ability --pairs 12`; the
     # frames lie a median 11.0° (90th percentile 23.0°) from the mean rotation.
     wrist_offset=WristOffset(
         rotvec=(0.0193, -0.1498, 0.1368),  # rad, |11.7°|
@@ -112,8 +112,8 @@ HAND = HandModel(
         source="retarget calibrate-wrist: 12 generated pairs of operator2 (seed 1), 3600 frames",
     ),
     # A third of the wrist-pose weights: the coupled fingers reach the human's fingertips
-    # with the wrist's help. benchmarks/retarget_speed_quality.py --hands ability --n-pairs 20
-    # (2026-12-03), 1 → 1/3: keypoint error 14.19 → 13.98 mm (dex-retargeting 11.81), strict
+    # with the wrist's help. `python -m benchmarks.retarget_speed_quality --hands ability
+    # --n-pairs 20`, 1 → 1/3: keypoint error 14.19 → 13.98 mm (dex-retargeting 11.81), strict
     # re-sim success 40 → 40 % (0: 14.10 mm, kinematic runs only).
     wrist_weight=1 / 3,
 )

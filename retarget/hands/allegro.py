@@ -115,7 +115,7 @@ HAND = HandModel(
     joint_damping=DAMPING,
     joint_frictionloss=0.0,
     default_posture={"joint_12.0": 0.263},  # thumb rotation at its lower limit (URDF), others 0
-    # Measured: `retarget calibrate-wrist --hand allegro --pairs 12` (2026-12-03); the
+    # Measured: `retarget calibrate-wrist --hand allegro --pairs 12`; the
     # frames lie a median 8.3° (90th percentile 14.3°) from the mean rotation.
     wrist_offset=WristOffset(
         rotvec=(-0.0970, -0.1907, -0.1150),  # rad, |13.9°|

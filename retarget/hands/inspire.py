@@ -87,7 +87,7 @@ HAND = HandModel(
         "th_ip = 0.667 th_cmc_pitch, *_pip = 1.06399 *_mcp - 0.04545"
     ),
     default_posture={},  # all 0: fingers straight (PIP -0.045 by the coupling), thumb open
-    # Measured: `retarget calibrate-wrist --hand inspire --pairs 12` (2026-12-03); the
+    # Measured: `retarget calibrate-wrist --hand inspire --pairs 12`; the
     # frames lie a median 9.3° (90th percentile 19.0°) from the mean rotation.
     wrist_offset=WristOffset(
         rotvec=(-0.1359, -0.2631, 0.2720),  # rad, |23.0°|
@@ -95,8 +95,8 @@ HAND = HandModel(
         source="retarget calibrate-wrist: 12 generated pairs of operator2 (seed 1), 3600 frames",
     ),
     # A third of the wrist-pose weights: the coupled fingers reach the human's fingertips
-    # with the wrist's help. benchmarks/retarget_speed_quality.py --hands inspire --n-pairs 20
-    # (2026-12-03), 1 → 1/3: keypoint error 17.76 → 17.46 mm (dex-retargeting 15.45), strict
+    # with the wrist's help. `python -m benchmarks.retarget_speed_quality --hands inspire
+    # --n-pairs 20`, 1 → 1/3: keypoint error 17.76 → 17.46 mm (dex-retargeting 15.45), strict
     # re-sim success 25 → 30 % (0: 17.90 mm, kinematic runs only).
     wrist_weight=1 / 3,
 )

@@ -92,7 +92,7 @@ HAND = HandModel(
         for j in _JOINTS
     ),
     default_posture={},  # all 0: the flat open hand of the URDF
-    # Measured: `retarget calibrate-wrist --hand leap --pairs 12` (2026-12-03); the
+    # Measured: `retarget calibrate-wrist --hand leap --pairs 12`; the
     # frames lie a median 8.1° (90th percentile 13.1°) from the mean rotation.
     wrist_offset=WristOffset(
         rotvec=(-0.0351, 0.0061, -0.2743),  # rad, |15.8°|

@@ -86,7 +86,7 @@ HAND = HandModel(
     # No wrist term: a gripper's wrist has no pose that matches the human wrist's (the
     # calibration's mean offset is 36.7° with a 35.1° median scatter, `retarget
     # calibrate-wrist --hand panda --pairs 12`), so its two pads and the contacts place it.
-    # benchmarks/retarget_speed_quality.py --hands panda --n-pairs 20 (2026-12-03), 1 → 0:
+    # python -m benchmarks.retarget_speed_quality --hands panda --n-pairs 20, 1 → 0:
     # keypoint error 40.92 → 19.34 mm (dex-retargeting 20.58), strict re-sim success 7 → 7 %.
     wrist_weight=0.0,
 )

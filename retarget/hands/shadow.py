@@ -126,7 +126,7 @@ HAND = HandModel(
         "+-1 mm (J0 ~ 1.14*J1), kept from the source; only J1 is actuated"
     ),
     default_posture={},  # all joints 0: fingers straight, thumb in the palm plane
-    # Measured: `retarget calibrate-wrist --hand shadow --pairs 12` (2026-12-03), WRJ1 and
+    # Measured: `retarget calibrate-wrist --hand shadow --pairs 12`, WRJ1 and
     # WRJ0 held at 0; the frames lie a median 6.8° (90th percentile 12.3°) from the mean rotation.
     wrist_offset=WristOffset(
         rotvec=(0.0885, -0.1423, -0.0161),  # rad, |9.6°|

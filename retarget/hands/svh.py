@@ -129,7 +129,7 @@ HAND = HandModel(
     joint_damping=0.0,
     joint_frictionloss=0.0,
     default_posture={},  # all 0: fingers straight, thumb not opposed
-    # Measured: `retarget calibrate-wrist --hand svh --pairs 12` (2026-12-03); the
+    # Measured: `retarget calibrate-wrist --hand svh --pairs 12`; the
     # frames lie a median 9.3° (90th percentile 14.6°) from the mean rotation.
     wrist_offset=WristOffset(
         rotvec=(0.1268, -0.1493, 0.3065),  # rad, |20.8°|
@@ -138,7 +138,7 @@ HAND = HandModel(
     ),
     # The wrist is placed by the fingertips and contacts: the human wrist's pose (even with the
     # offset above, 9.3° median scatter) held them off. benchmarks/retarget_speed_quality.py
-    # --hands svh --n-pairs 20 (2026-12-03), 1 → 0: keypoint error 15.05 → 13.90 mm
+    # --hands svh --n-pairs 20, 1 → 0: keypoint error 15.05 → 13.90 mm
     # (dex-retargeting 13.34), strict re-sim success 45 → 45 %.
     wrist_weight=0.0,
 )

@@ -394,7 +394,7 @@ class CollisionLimit(Limit):
     """Of the near pairs, :meth:`near_violation` measures those the linear rows predict within
     this [m] of their allowed distance after the step (and those without a row). Measured on
     the speed benchmark's 20 pairs on all seven hands (740,793 near pairs at the end of a
-    step, 2026-12-06): the true distance was within 2.51 mm of the prediction everywhere and
+    step): the true distance was within 2.51 mm of the prediction everywhere and
     within 0.07 mm where the prediction was beyond 2 mm, so a pair predicted 3 mm out would
     need an error of 3.5 mm to end 0.5 mm inside its margin (the check's tolerance); 58 % of
     the near pairs are predicted beyond 3 mm (Inspire 78 %, Ability 69 %, Shadow 59 %, Allegro

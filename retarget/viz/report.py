@@ -202,7 +202,7 @@ def force_notes(m: dict) -> dict[str, str]:
             text += f" (human replay {r:.2f})"
         if v.get("load_share") is not None:
             text += f" · {100 * v['load_share']:.0f} % of the human hand's force"
-        if "contact_reach_m" in v:  # runs written before bbcfe31 have none
+        if "contact_reach_m" in v:  # runs of older versions have none
             d = v["contact_reach_m"]
             text += (
                 " · no contact target in the plan"
