@@ -17,6 +17,7 @@ from dexcanvas_core.capture.cli import add_import_parser, run_import_command
 from dexcanvas_core.demos import BuildConfig, run_build
 from dexcanvas_core.errors import DexCanvasError
 from dexcanvas_core.example import build_example_dataset
+from dexcanvas_core.exits import EXIT_FAILED, EXIT_OK, run_command
 from dexcanvas_core.io import export_parquet, open_dataset
 from dexcanvas_core.io.decode import row_to_trajectory
 from dexcanvas_core.loaders.selection import select_rows
@@ -367,13 +368,14 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(message)s"
     )
-    try:
+
+    def run() -> int:
         if args.command != "import":  # import reads its --objects for masses only
             use_object_options(args)
         if args.command == "info":
             run_info(InfoConfig(args.path, args.json))
         elif args.command == "validate":
-            return 1 if run_validate(ValidateConfig(args.path)) else 0
+            return EXIT_FAILED if run_validate(ValidateConfig(args.path)) else EXIT_OK
         elif args.command == "export":
             run_export(
                 ExportConfig(
@@ -385,22 +387,21 @@ def main(argv: list[str] | None = None) -> int:
                 )
             )
         elif args.command == "demos":
-            return 1 if run_demos_build_command(args) else 0
+            return EXIT_FAILED if run_demos_build_command(args) else EXIT_OK
         elif args.command == "fit":
             run_fit_command(args)
         elif args.command == "simulate":
             m = run_simulate_command(args)
-            return 0 if m["success"] else 1
+            return EXIT_OK if m["success"] else EXIT_FAILED
         elif args.command == "synthesize":
             run_synthesize_command(args)
         elif args.command == "import":
             run_import_command(args)
         elif args.command == "example":
             run_example(ExampleConfig(args.out, args.seed, args.overwrite))
-    except DexCanvasError as e:
-        print(f"dexcanvas {args.command}: error: {e}", file=sys.stderr)
-        return 2
-    return 0
+        return EXIT_OK
+
+    return run_command("dexcanvas", args.command, run)
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from dexcanvas_core.errors import DexCanvasError
+from dexcanvas_core.exits import EXIT_FAILED, EXIT_OK, run_command
 from dexcanvas_core.objects.options import add_object_options, use_object_options
 from retarget import __version__
 from retarget.cli_commands import (
@@ -356,6 +357,7 @@ COMMANDS: dict[str, Command] = {
         add_arguments=_add_run_args,
         make_config=_run_config,
         run=cmd_run,
+        exit_code=lambda m: EXIT_OK if m["success"] or m.get("success_refined") else EXIT_FAILED,
     ),
     "hands": Command(
         help="list the robot hands: DoF, actuators, finger mapping, model source",
@@ -420,13 +422,12 @@ def main(argv: list[str] | None = None) -> int:
         level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(message)s"
     )
     cmd = COMMANDS[args.command]
-    try:
+
+    def run() -> int:
         use_object_options(args)
-        result = cmd.run(cmd.make_config(args))
-    except (RetargetError, DexCanvasError) as e:
-        print(f"retarget {args.command}: error: {e}", file=sys.stderr)
-        return 2
-    return cmd.exit_code(result)
+        return cmd.exit_code(cmd.run(cmd.make_config(args)))
+
+    return run_command("retarget", args.command, run, (RetargetError, DexCanvasError))
 
 
 if __name__ == "__main__":
