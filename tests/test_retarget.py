@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -33,6 +34,13 @@ from retarget.hands import get_hand
 from retarget.kinematics import MujocoKinematics, PinocchioKinematics
 from retarget.retargeter import Retargeter
 from retarget.state import RobotState
+
+
+def run_exit_code(out) -> int:
+    """The exit code ``retarget run`` owes a finished run in ``out``: 0 when the re-simulation
+    (or its refinement) kept the object, 3 when it failed validation."""
+    m = json.loads((Path(out) / "metrics.json").read_text())
+    return 0 if m["success"] or m.get("success_refined") else 3
 
 
 @pytest.fixture(scope="module")
@@ -353,7 +361,7 @@ def test_cli_run_writes_outputs(small_dataset, tmp_path, capsys):
             "--quiet",
         ]
     )
-    assert rc == 0
+    assert rc == run_exit_code(out)
     m = json.loads((out / "metrics.json").read_text())
     for key in ("success", "object_pos_err_max_m", "object_pos_err_mean_m",
                 "object_rot_err_mean_rad", "keypoint_err_mean_m", "penetration_max_m",
@@ -456,7 +464,7 @@ def test_cli_run_time_scale_slows_the_demonstration_and_says_so(small_dataset, t
     out = tmp_path / "slow"
     argv = ["run", "--hand", "allegro", "--pair", "cube2/tripod", "--dataset",
             str(small_dataset), "--out", str(out), "--time-scale", "2"]  # fmt: skip
-    assert main(argv) == 0
+    assert main(argv) == run_exit_code(out)
     assert "executed 2× slower than demonstrated" in capsys.readouterr().out
     m = json.loads((out / "metrics.json").read_text())
     assert m["time_scale"] == 2.0 and m["frames"] == 120 and m["fps"] == pytest.approx(60.0)
@@ -484,9 +492,9 @@ def test_cli_run_set_changes_the_retargeting_and_is_recorded(small_dataset, tmp_
     moves the links' contact points by millimetres), and metrics.json and the summary
     say what was changed; a malformed pair is argparse's usage error."""
     base = ["run", "--hand", "shadow", "--pair", "cube2/tripod", "--dataset", str(small_dataset)]
-    assert main([*base, "--out", str(tmp_path / "a"), "--quiet"]) == 0
+    assert main([*base, "--out", str(tmp_path / "a"), "--quiet"]) == run_exit_code(tmp_path / "a")
     argv = [*base, "--out", str(tmp_path / "b"), "--set", "w_contacts=1.0", "--set", "iterations=5"]
-    assert main(argv) == 0
+    assert main(argv) == run_exit_code(tmp_path / "b")
     assert "w_contacts=1.0, iterations=5" in capsys.readouterr().out
     a = json.loads((tmp_path / "a" / "metrics.json").read_text())
     b = json.loads((tmp_path / "b" / "metrics.json").read_text())
