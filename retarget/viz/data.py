@@ -88,7 +88,10 @@ def load_run(run_dir: str | Path) -> RunFiles:
     try:
         metrics = json.loads((run_dir / "metrics.json").read_text())
     except (OSError, ValueError) as e:
-        raise VizError(f"{run_dir / 'metrics.json'}: cannot read it as JSON: {e}") from e
+        raise VizError(
+            f"{run_dir / 'metrics.json'}: cannot read it as JSON ({e}); rerun retarget run to "
+            "write it again"
+        ) from e
     if not isinstance(metrics, dict):
         raise VizError(
             f"{run_dir / 'metrics.json'}: expected a JSON object, got {type(metrics).__name__} "
@@ -96,7 +99,10 @@ def load_run(run_dir: str | Path) -> RunFiles:
         )
     absent = [k for k in _METRICS_KEYS if k not in metrics]
     if absent:
-        raise VizError(f"{run_dir / 'metrics.json'}: missing field(s) {', '.join(absent)}")
+        raise VizError(
+            f"{run_dir / 'metrics.json'}: missing field(s) {', '.join(absent)} (not written by "
+            "retarget run? rerun it to write the directory again)"
+        )
     try:
         with np.load(run_dir / "robot_trajectory.npz", allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
@@ -107,7 +113,10 @@ def load_run(run_dir: str | Path) -> RunFiles:
         ) from e
     absent = [k for k in _NPZ_KEYS if k not in arrays]
     if absent:
-        raise VizError(f"{run_dir / 'robot_trajectory.npz'}: missing array(s) {', '.join(absent)}")
+        raise VizError(
+            f"{run_dir / 'robot_trajectory.npz'}: missing array(s) {', '.join(absent)} (not "
+            "written by retarget run? rerun it to write the directory again)"
+        )
     T = arrays["q"].shape[0] if arrays["q"].ndim else None
     for k in _NPZ_KEYS:
         if k in ("joint_names", "force_parts"):
