@@ -45,14 +45,14 @@ def call(main: Callable[[list[str]], int], argv: Sequence[object], capsys) -> Ou
 
 
 def assert_refused(o: Outcome, where: str, *needles: str, code: int = EXIT_USAGE) -> str:
-    """Check the exit contract of a refusal: ``code``, no traceback, exactly one error line
+    """Check the exit contract of a refusal: ``code``, no traceback, stderr exactly one line
     ``<where>: error: …`` holding every needle (case-insensitive); returns that line."""
     assert "Traceback" not in o.err, o.err
     assert o.rc == code, (o.rc, o.err[-2000:])
-    lines = o.error_lines()
-    assert len(lines) == 1, o.err
+    lines = [line for line in o.err.splitlines() if line.strip()]
+    assert len(lines) == 1, o.err  # the error line alone: no warnings, no continuation
     line = lines[0]
-    assert line.startswith(f"{where}: error:") or f"{where}: error:" in line, line
+    assert line.startswith(f"{where}: error: "), line
     for n in needles:
         assert n.lower() in line.lower(), (n, line)
     return line

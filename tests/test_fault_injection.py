@@ -677,7 +677,7 @@ def test_corpus_keypoints_cli(f, keypoints_m, tmp_path_factory, capsys):
             assert np.isfinite(z["q"]).all()
 
 
-@CORPUS
+@settings(CORPUS, max_examples=3)
 @given(f=_keypoint_faults())
 def test_corpus_keypoints_in_millimetres_are_refused(f, keypoints_m, tmp_path_factory, capsys):
     """A well-formed keypoint file in millimetres read as metres is refused as such."""
