@@ -15,7 +15,7 @@ from pathlib import Path
 from dexcanvas_core import __version__
 from dexcanvas_core.capture.cli import add_import_parser, run_import_command
 from dexcanvas_core.demos import BuildConfig, run_build
-from dexcanvas_core.errors import DexCanvasError
+from dexcanvas_core.errors import DatasetError, DexCanvasError
 from dexcanvas_core.example import build_example_dataset
 from dexcanvas_core.exits import EXIT_FAILED, EXIT_OK, run_command
 from dexcanvas_core.io import export_parquet, open_dataset
@@ -113,6 +113,11 @@ class ExportConfig:
 
 def run_export(cfg: ExportConfig) -> Path:
     """Export a dataset (optionally filtered) to a Parquet file."""
+    if Path(cfg.out).expanduser().is_dir():
+        raise DatasetError(
+            f"--parquet {cfg.out} is a directory; give the path of a file, e.g. "
+            f"{Path(cfg.out) / 'export.parquet'}"
+        )
     sel = select_rows(
         open_dataset(cfg.path),
         manipulation_types=list(cfg.manipulation_types) or None,

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -128,7 +129,7 @@ def load_keypoints(path, units: str = "m") -> np.ndarray:
                 a = a[1:]
         else:
             raise RetargetError(f"unsupported keypoint file {path.name}: use .npy, .npz or .csv")
-    except (OSError, ValueError) as e:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:  # empty, truncated
         raise RetargetError(f"cannot read keypoints from {path}: {e}") from e
     a = np.asarray(a, dtype=np.float64)
     if a.ndim == 2 and a.shape[1] == 63:

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from dexcanvas_core.errors import DatasetError, DexCanvasError
+from dexcanvas_core.errors import DatasetError, DexCanvasError, ValidationError
 from dexcanvas_core.io.decode import _child, row_to_trajectory
 from dexcanvas_core.io.schema import (
     REQUIRED_COLUMNS,
@@ -65,6 +65,17 @@ def build_filter(
     ``manipulation_types`` match ``trajectory_metadata.gesture`` as stored; callers that accept
     names and numeric codes pass every spelling of the same type.
     """
+    for name, values in (
+        ("manipulation_types", manipulation_types),
+        ("objects", objects),
+        ("operators", operators),
+    ):
+        if isinstance(values, (str, bytes)):
+            raise ValidationError(
+                f"{name} must be a list of names, got the string {values!r}; "
+                f"write {name}=[{values!r}]",
+                field=name,
+            )
     parts = []
     if manipulation_types:
         parts.append(_in_filter("trajectory_metadata.gesture", manipulation_types))

@@ -213,6 +213,11 @@ def run_synthesize(cfg: SynthesizeConfig) -> dict:
 
     if cfg.expand < 1:
         raise DatasetError("--expand must be at least 1")
+    if cfg.limit is not None and cfg.limit < 1:
+        raise DatasetError(
+            f"--limit must be at least 1 (the number of source rows to expand), got {cfg.limit}; "
+            "leave it out to expand every row"
+        )
     out = Path(cfg.out)
     _check_out(out, cfg.overwrite)
     cfg.sim.validate()

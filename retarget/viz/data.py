@@ -11,6 +11,7 @@ every robot contact point with its force); :func:`scene_data` puts it all into o
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -87,21 +88,45 @@ def load_run(run_dir: str | Path) -> RunFiles:
     try:
         metrics = json.loads((run_dir / "metrics.json").read_text())
     except (OSError, ValueError) as e:
-        raise VizError(f"{run_dir / 'metrics.json'}: cannot read it as JSON: {e}") from e
+        raise VizError(
+            f"{run_dir / 'metrics.json'}: cannot read it as JSON ({e}); rerun retarget run to "
+            "write it again"
+        ) from e
+    if not isinstance(metrics, dict):
+        raise VizError(
+            f"{run_dir / 'metrics.json'}: expected a JSON object, got {type(metrics).__name__} "
+            "(rerun retarget run to write it again)"
+        )
     absent = [k for k in _METRICS_KEYS if k not in metrics]
     if absent:
-        raise VizError(f"{run_dir / 'metrics.json'}: missing field(s) {', '.join(absent)}")
+        raise VizError(
+            f"{run_dir / 'metrics.json'}: missing field(s) {', '.join(absent)} (not written by "
+            "retarget run? rerun it to write the directory again)"
+        )
     try:
         with np.load(run_dir / "robot_trajectory.npz", allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError) as e:
-        raise VizError(f"{run_dir / 'robot_trajectory.npz'}: cannot read it: {e}") from e
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:  # truncated or not a zip
+        raise VizError(
+            f"{run_dir / 'robot_trajectory.npz'}: cannot read it ({e}); the file is truncated "
+            "or not a run's output: rerun retarget run to write it again"
+        ) from e
     absent = [k for k in _NPZ_KEYS if k not in arrays]
     if absent:
-        raise VizError(f"{run_dir / 'robot_trajectory.npz'}: missing array(s) {', '.join(absent)}")
-    T = arrays["q"].shape[0]
+        raise VizError(
+            f"{run_dir / 'robot_trajectory.npz'}: missing array(s) {', '.join(absent)} (not "
+            "written by retarget run? rerun it to write the directory again)"
+        )
+    T = arrays["q"].shape[0] if arrays["q"].ndim else None
     for k in _NPZ_KEYS:
-        if k not in ("joint_names", "force_parts") and arrays[k].shape[0] != T:
+        if k in ("joint_names", "force_parts"):
+            continue
+        if T is None or arrays[k].ndim == 0:
+            raise VizError(
+                f"{run_dir / 'robot_trajectory.npz'}: {k} is a scalar, not per-frame values "
+                "(rerun retarget run to write it again)"
+            )
+        if arrays[k].shape[0] != T:
             raise VizError(
                 f"{run_dir / 'robot_trajectory.npz'}: {k} has {arrays[k].shape[0]} frames, "
                 f"q has {T}"

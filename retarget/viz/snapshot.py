@@ -282,8 +282,7 @@ def run_snapshot(cfg: SnapshotConfig) -> dict:
     cfg = cfg.validate()
     require("meshcat", "PIL")
     renderer = check_renderer(cfg.renderer)  # fail before the long part
-    out_dir = Path(cfg.out)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = Path(cfg.out)  # made by draw(), once the run has loaded
     run, human, frames = _prepare(cfg)
     hand = get_hand(run.metrics["hand"])
     sim = None
