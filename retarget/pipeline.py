@@ -70,6 +70,9 @@ class RunConfig:
     """Which of the dataset's demonstrations of this pair (0-based); without a pair, which row."""
     out: Path | None = None
     """Output directory; default ``runs/<hand>_<object>_<type>_<index>``."""
+    overwrite: bool = False
+    """Replace the run in ``out`` (its ``metrics.json``, ``robot_trajectory.npz``); without it
+    a directory holding either is refused before any work."""
     backend: Literal["pinocchio", "mink"] = "pinocchio"
     forces: bool = False
     """Force matching: the robot presses like the human did (``retarget.force_matching``). A

@@ -15,6 +15,7 @@ import numpy as np
 from dexcanvas_core.errors import MissingDependencyError
 from dexcanvas_core.mocap.frames import UNITS_M
 from dexcanvas_core.mocap.stream import MarkerStream
+from dexcanvas_core.safe_io import atomic_path
 
 
 def _unit_name(unit_m: float) -> str:
@@ -61,7 +62,7 @@ def write_csv(
     def cell(v: float) -> str:
         return "" if not np.isfinite(v) else f"{v:.6f}"
 
-    with p.open("w", newline="") as fh:
+    with atomic_path(p) as tmp, tmp.open("w", newline="") as fh:
         fh.write(f"# units: {unit}\n# fps: {stream.fps:g}\n")
         w = csv.writer(fh)
         if layout == "wide":
