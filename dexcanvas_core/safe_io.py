@@ -260,9 +260,12 @@ def check_output(
         names = [path] if contents is None else [path / n for n in contents]
         found = [p for p in names if p.exists()]
         if found and not overwrite:
-            raise OutputExistsError(
-                f"{what} {found[0]} already exists; pass --overwrite to replace it"
+            held = (
+                f"{path} already exists"
+                if contents is None
+                else (f"{path} already holds {found[0].name}")
             )
+            raise OutputExistsError(f"{what} {held}; pass --overwrite to replace it")
     # The nearest directory that exists must be writable (files go in it, or it takes the
     # missing directories); a file on the way makes the path impossible.
     base = path if (kind == "dir" and path.is_dir()) else path.parent
