@@ -41,7 +41,8 @@ def write_c3d(stream: MarkerStream, path: str | Path, labels: list[str] | None =
     pts = np.ones((4, M, T))
     pts[:3] = np.transpose(stream.positions, (2, 1, 0))
     c["data"]["points"] = pts
-    c.write(str(p))
+    with atomic_path(p, suffix=".c3d") as tmp:
+        c.write(str(tmp))
     return p
 
 

@@ -235,11 +235,6 @@ def run_report(cfg: ReportConfig) -> Path:
     cfg = cfg.validate()
     require("matplotlib", "PIL", *(["meshcat"] if cfg.snapshots else []))
     out = check_output(cfg.output_path(), overwrite=cfg.overwrite, kind="file")
-    with output_lock(out):
-        return _report(cfg, out)
-
-
-def _report(cfg: ReportConfig, out: Path) -> Path:
     sections = [_section(Path(d), cfg) for d in cfg.run_dirs]
     heatmap = None
     entries = [s.heatmap_entry for s in sections if s.heatmap_entry is not None]
@@ -250,7 +245,8 @@ def _report(cfg: ReportConfig, out: Path) -> Path:
             else sections[0].run_dir / PLOTS_DIR / f"contact_heatmap.{cfg.plot_format}",
             entries,
         )
-    atomic_write_text(out, render_html(sections, heatmap, out))
+    with output_lock(out):
+        atomic_write_text(out, render_html(sections, heatmap, out))
     return out
 
 
