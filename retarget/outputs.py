@@ -26,7 +26,7 @@ def open_run_dir(
     """Check run directory ``out_dir`` (:func:`dexcanvas_core.safe_io.check_output`: an
     existing run without ``overwrite``, a file, a read-only place, a full disk), create it and
     hold its lock (:func:`dexcanvas_core.safe_io.output_lock`, inside it) while the block
-    runs; yield it as a ``Path``. A directory made here and left empty by an error is removed.
+    runs; yield it as a ``Path``. Directories made here and left empty by an error are removed.
     ``contents``: the files that make it an existing output (default: a run's).
 
     Raises:
@@ -34,7 +34,7 @@ def open_run_dir(
             process holds the lock.
     """
     out_dir = check_output(out_dir, overwrite=overwrite, kind="dir", what=what, contents=contents)
-    created = not out_dir.exists()
+    created = [d for d in (out_dir, *out_dir.parents) if not d.exists()]  # leaf first
     out_dir.mkdir(parents=True, exist_ok=True)
     try:
         with output_lock(out_dir, where="inside"):
@@ -42,9 +42,11 @@ def open_run_dir(
             check_output(out_dir, overwrite=overwrite, kind="dir", what=what, contents=contents)
             yield out_dir
     except BaseException:
-        if created:
-            with contextlib.suppress(OSError):
-                out_dir.rmdir()  # only when empty
+        for d in created:
+            try:
+                d.rmdir()  # only when empty
+            except OSError:
+                break
         raise
 
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from retarget.metrics import run_metrics
 from retarget.outputs import open_run_dir, write_run
-from retarget.pipeline import RunConfig, run_pipeline
+from retarget.pipeline import RunConfig, check_options, run_pipeline
 from retarget.summary import print_summary
 
 __all__ = ["RunConfig", "run_retarget"]
@@ -42,6 +42,7 @@ def run_retarget(cfg: RunConfig) -> dict:
     >>> m["hand"], m["pair"], sorted(os.listdir(out))
     ('panda', 'cube2/tripod', ['metrics.json', 'robot_trajectory.npz'])
     """
+    check_options(cfg)  # bad options before the output directory is made
     with open_run_dir(cfg.output_dir(), overwrite=cfg.overwrite) as out_dir:
         result = run_pipeline(cfg)
         metrics = run_metrics(result, cfg)
