@@ -298,3 +298,16 @@ def test_mujoco_warnings_go_to_logging_not_cwd(tmp_path, monkeypatch, caplog):
     assert d.warning[mujoco.mjtWarning.mjWARN_BADQVEL].number >= 1  # still counted
     assert any("huge value" in r.getMessage() for r in caplog.records)
     assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+
+
+def test_keypoints_overwrite(tmp_path, capsys):
+    from dexcanvas_core import load_demonstration
+
+    np.save(tmp_path / "kp.npy", load_demonstration("cube2/tripod").hand.joint_pos[:10])
+    out = tmp_path / "kp_run"
+    args = ["keypoints", "--hand", "leap", "--input", str(tmp_path / "kp.npy"), "--fps", "120"]
+    assert retarget_cli.main([*args, "--out", str(out)]) == 0
+    assert retarget_cli.main([*args, "--out", str(out)]) == 2
+    assert "already holds" in capsys.readouterr().err
+    assert retarget_cli.main([*args, "--out", str(out), "--overwrite"]) == 0
+    assert sorted(os.listdir(out)) == ["metrics.json", "robot_trajectory.npz"]
