@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from dexcanvas_core.demos.feasibility import spread_pairs as select_pairs  # the suite's order
+from dexcanvas_core.safe_io import atomic_write_text
 from retarget.overrides import parse_override  # noqa: F401 (the benchmarks' --set type)
 
 GENERATION_ATTEMPTS = 3
@@ -113,27 +114,9 @@ def json_default(o):
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write ``text`` through a temporary file (named by the process id, so concurrent writers
-    never share one) and a rename; the temporary file is gone afterwards either way."""
-    atomic_write_bytes(path, text.encode())
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` through a temporary file and a rename, as :func:`atomic_write_text`."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
 def atomic_write_json(path: Path, obj, indent: int = 2) -> None:
     """Write ``obj`` as indented JSON (:func:`json_default` for numpy values and paths),
-    atomically (:func:`atomic_write_text`)."""
+    atomically (:func:`dexcanvas_core.safe_io.atomic_write_text`)."""
     atomic_write_text(path, json.dumps(obj, indent=indent, default=json_default))
 
 

@@ -22,9 +22,10 @@ import sys
 from pathlib import Path
 
 from benchmarks import wrist_tracking, ycb_models
-from benchmarks._common import PAGES, RESULTS, atomic_write_text, display_path, newest_result, pct
+from benchmarks._common import PAGES, RESULTS, display_path, newest_result, pct
 from benchmarks.real_motion.config import PAGE as REAL_MOTION_PAGE
 from benchmarks.real_motion.tables import page_markdown
+from dexcanvas_core.safe_io import atomic_write_text
 
 PAGE = PAGES / "summary.md"
 """The summary page."""

@@ -70,6 +70,7 @@ from benchmarks._common import (
     versions,
 )
 from dexcanvas_core.objects.geometry import object_geometry
+from dexcanvas_core.safe_io import atomic_write_text
 from dexcanvas_core.table import table_of
 from dexcanvas_core.taxonomy import Pair
 from dexcanvas_core.trajectory import HandTrack, ObjectTrack, Trajectory
@@ -502,8 +503,7 @@ def main(argv: list[str] | None = None) -> int:
         pos, rot = t["value"]
         ok = "[green]met[/green]" if t["met"] else "[red]not met[/red]"
         console.print(f"{t['hand']}: {t['target']}: {pos:.2f} mm, {rot:.3f}° — {ok}")
-    args.page.parent.mkdir(parents=True, exist_ok=True)
-    args.page.write_text(render_page(doc, args.out))
+    atomic_write_text(args.page, render_page(doc, args.out))
     console.print(f"wrote {args.out} and {args.page} ({doc['wall_time_s']:.0f} s)")
     return 0
 

@@ -47,6 +47,7 @@ from dexcanvas_core.demos import DemoError, generate_demo
 from dexcanvas_core.demos.feasibility import feasibility
 from dexcanvas_core.errors import DexCanvasError
 from dexcanvas_core.objects.geometry import object_geometry
+from dexcanvas_core.safe_io import atomic_write_text
 from dexcanvas_core.sim.scene import OBJECT_BODY, add_object
 from dexcanvas_core.taxonomy import MANIPULATION_TYPES, OBJECTS, Pair, clear_objects, use_objects
 from retarget.hands import get_hand
@@ -215,8 +216,7 @@ def main(argv=None) -> int:
     }
     args.out = args.out or result_path(NAME, res["commit"])
     atomic_write_json(args.out, res)
-    args.page.parent.mkdir(parents=True, exist_ok=True)
-    args.page.write_text(render_page(json.loads(json.dumps(res)), args.out))
+    atomic_write_text(args.page, render_page(json.loads(json.dumps(res)), args.out))
     t = Table(title="YCB-style items: composition vs model")
     for col in ("item", "size comp. [mm]", "size model [mm]", "success comp.", "success model"):
         t.add_column(col)

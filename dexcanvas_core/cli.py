@@ -22,6 +22,7 @@ from dexcanvas_core.io import export_parquet, open_dataset
 from dexcanvas_core.io.decode import row_to_trajectory
 from dexcanvas_core.loaders.selection import select_rows
 from dexcanvas_core.objects.options import add_object_options, use_object_options
+from dexcanvas_core.safe_io import check_output
 
 
 def _human_bytes(n: int) -> str:
@@ -109,6 +110,8 @@ class ExportConfig:
     objects: tuple[str, ...] = ()
     manipulation_types: tuple[str, ...] = ()
     operators: tuple[str, ...] = ()
+    overwrite: bool = False
+    """Replace an existing Parquet file; without it one is refused before any work."""
 
 
 def run_export(cfg: ExportConfig) -> Path:
@@ -118,13 +121,14 @@ def run_export(cfg: ExportConfig) -> Path:
             f"--parquet {cfg.out} is a directory; give the path of a file, e.g. "
             f"{Path(cfg.out) / 'export.parquet'}"
         )
+    check_output(cfg.out, overwrite=cfg.overwrite, kind="file", what="--parquet")
     sel = select_rows(
         open_dataset(cfg.path),
         manipulation_types=list(cfg.manipulation_types) or None,
         objects=list(cfg.objects) or None,
         operators=list(cfg.operators) or None,
     )
-    out = export_parquet(cfg.path, cfg.out, filter=sel.filter)
+    out = export_parquet(cfg.path, cfg.out, filter=sel.filter, overwrite=cfg.overwrite)
     print(f"wrote {out}")
     return out
 
@@ -288,6 +292,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--objects", nargs="*", default=[], help="object ids, e.g. cube2 sphere1")
     s.add_argument("--types", nargs="*", default=[], help="manipulation types (names or codes)")
     s.add_argument("--operators", nargs="*", default=[])
+    s.add_argument("--overwrite", action="store_true", help="replace an existing --parquet file")
 
     s = sub.add_parser("demos", help="generated human demonstrations")
     demos_sub = s.add_subparsers(dest="demos_command", required=True, metavar="SUBCOMMAND")
@@ -389,6 +394,7 @@ def main(argv: list[str] | None = None) -> int:
                     tuple(args.objects),
                     tuple(args.types),
                     tuple(args.operators),
+                    args.overwrite,
                 )
             )
         elif args.command == "demos":

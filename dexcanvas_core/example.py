@@ -23,6 +23,7 @@ from dexcanvas_core.io import write_dataset
 from dexcanvas_core.keypoints import MANO_FINGER_ORDER
 from dexcanvas_core.mano import HandSkeleton, ManoLayer
 from dexcanvas_core.rotations import aa_to_matrix, matrix_to_aa
+from dexcanvas_core.safe_io import check_output
 from dexcanvas_core.taxonomy import Pair
 from dexcanvas_core.trajectory import HandTrack, ObjectMove, ObjectTrack, Trajectory
 
@@ -189,7 +190,13 @@ def build_example_dataset(
     overwrite: bool = False,
     progress: bool = False,
 ) -> Path:
-    """Write the example dataset (Lance, public layout) to ``out``; returns the path."""
+    """Write the example dataset (Lance, public layout) to ``out``; returns the path.
+
+    Raises:
+        dexcanvas_core.safe_io.OutputError: ``out`` exists and ``overwrite`` is false, or
+            cannot be written (checked first).
+    """
+    check_output(out, overwrite=overwrite, kind="dir")
     n = len(EXAMPLE_PAIRS) * len(OPERATORS) * reps
     trajs = example_trajectories(seed=seed, reps=reps)
     if progress:

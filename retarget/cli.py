@@ -96,6 +96,11 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
         default=None,
         help="output directory (default runs/<hand>_<object>_<type>_<index>)",
     )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the run already in --out (metrics.json, robot_trajectory.npz)",
+    )
     p.add_argument("--backend", choices=["pinocchio", "mink"], default="pinocchio")
     p.add_argument(
         "--forces",
@@ -183,6 +188,7 @@ def _plain_run_config(args: argparse.Namespace):
         dataset=args.dataset,
         index=args.index,
         out=args.out,
+        overwrite=args.overwrite,
         backend=args.backend,
         forces=args.forces,
         refine=args.refine,
@@ -214,6 +220,11 @@ def _add_snapshot_args(p: argparse.ArgumentParser) -> None:
         "--run", type=Path, default=None, metavar="RUN_DIR", help="draw an existing run directory"
     )
     p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the stills (and, retargeting, the run) already in --out",
+    )
     which = p.add_mutually_exclusive_group()
     which.add_argument("--frames", default=None, help="frames to draw, e.g. 0,60,120")
     which.add_argument("--every", type=int, default=None, metavar="N", help="every N-th frame")
@@ -257,6 +268,7 @@ def _snapshot_config(args: argparse.Namespace):
         height=args.height,
         scene_html=not args.no_html,
         backend=args.backend,
+        overwrite=args.overwrite,
         progress=not args.quiet,
     ).validate()
 
@@ -277,6 +289,7 @@ def _add_report_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--renderer", choices=["auto", "chromium", "mujoco"], default="auto")
     p.add_argument("--plot-format", choices=["png", "svg"], default="png")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
 
 
 def _report_config(args: argparse.Namespace):
@@ -289,6 +302,7 @@ def _report_config(args: argparse.Namespace):
         snapshots=not args.no_snapshots,
         renderer=args.renderer,
         plot_format=args.plot_format,
+        overwrite=args.overwrite,
     ).validate()
 
 
@@ -304,6 +318,9 @@ def _add_keypoints_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--units", choices=["m", "cm", "mm"], default="m")
     p.add_argument("--fps", type=float, required=True, help="frame rate [Hz]")
     p.add_argument("--out", type=Path, required=True, help="output directory")  # fmt: skip
+    p.add_argument(
+        "--overwrite", action="store_true", help="replace the trajectory already in --out"
+    )
 
 
 def _keypoints_config(args: argparse.Namespace):
@@ -312,7 +329,9 @@ def _keypoints_config(args: argparse.Namespace):
     # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.keypoint_input import KeypointsConfig
 
-    return KeypointsConfig(args.hand, args.input, args.fps, args.out, args.order, args.units)
+    return KeypointsConfig(
+        args.hand, args.input, args.fps, args.out, args.order, args.units, args.overwrite
+    )
 
 
 # ------------------------------------------------------------------ retarget calibrate-wrist

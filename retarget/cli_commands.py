@@ -88,6 +88,7 @@ class RunAndSnapshotConfig:
 def cmd_run(cfg) -> dict:
     """``retarget run``: :func:`retarget.run.run_retarget`, then the stills with ``--snapshot``."""
     # Lazy: start-up time of ``retarget --help`` (module docstring).
+    from retarget.outputs import open_run_dir
     from retarget.run import run_retarget
 
     if isinstance(cfg, RunAndSnapshotConfig):
@@ -95,9 +96,12 @@ def cmd_run(cfg) -> dict:
         from retarget.viz.snapshot import check_renderer, snapshot_run
 
         check_renderer(cfg.renderer)  # before the long part
-        metrics = run_retarget(cfg.run)
-        with _sigterm_as_exit():
-            manifest = snapshot_run(cfg.run.output_dir(), renderer=cfg.renderer)
+        run = cfg.run
+        # The run and its stills under one lock (run_retarget and snapshot_run re-enter it).
+        with open_run_dir(run.output_dir(), overwrite=run.overwrite) as out_dir:
+            metrics = run_retarget(run)
+            with _sigterm_as_exit():
+                manifest = snapshot_run(out_dir, renderer=cfg.renderer, overwrite=run.overwrite)
         if cfg.run.progress:
             _print_snapshot(manifest, cfg.run.output_dir())
         return metrics

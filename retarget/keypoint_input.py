@@ -10,7 +10,6 @@ triangle onto the observed one (Kabsch on the four points, exact for MANO-consis
 from __future__ import annotations
 
 import json
-import os
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,9 +19,11 @@ import numpy as np
 from dexcanvas_core.keypoints import MANO21, convert_keypoints
 from dexcanvas_core.mano import HandSkeleton
 from dexcanvas_core.rotations import matrix_to_aa
+from dexcanvas_core.safe_io import atomic_write_text
 from dexcanvas_core.trajectory import HandTrack, Trajectory
 from retarget.errors import RetargetError
 from retarget.hands import get_hand
+from retarget.outputs import open_run_dir
 from retarget.retargeter import Retargeter
 
 
@@ -36,6 +37,8 @@ class KeypointsConfig:
     out: Path
     order: str = "mano21"
     units: str = "m"
+    overwrite: bool = False
+    """Replace the trajectory already in ``out``; without it one is refused before any work."""
 
 
 _PALM = [MANO21.index(k) for k in ("wrist", "index1", "middle1", "pinky1", "ring1")]
@@ -148,12 +151,16 @@ def load_keypoints(path, units: str = "m") -> np.ndarray:
 
 
 def run_keypoints(cfg) -> dict:
-    """``retarget keypoints``: retarget a keypoint file; write the trajectory and metrics."""
+    """``retarget keypoints``: retarget a keypoint file; write the trajectory and metrics
+    (``out`` checked, created and locked first: :func:`retarget.outputs.open_run_dir`)."""
+    with open_run_dir(cfg.out, overwrite=cfg.overwrite) as out:
+        return _run_keypoints(cfg, out)
+
+
+def _run_keypoints(cfg, out: Path) -> dict:
     kp = load_keypoints(cfg.input, cfg.units)
     hand = get_hand(cfg.hand)
     robot = retarget_keypoints(hand, kp, cfg.fps, cfg.order)
-    out = cfg.out
-    out.mkdir(parents=True, exist_ok=True)
     robot.save_npz(out / "robot_trajectory.npz")
     metrics = {
         "hand": hand.name,
@@ -165,9 +172,7 @@ def run_keypoints(cfg) -> dict:
         "keypoint_err_max_m": float(robot.keypoint_err.max()),
         "ms_per_frame": robot.ms_per_frame,
     }
-    tmp = out / ".metrics.json.tmp"
-    tmp.write_text(json.dumps(metrics, indent=2, sort_keys=True))
-    os.replace(tmp, out / "metrics.json")
+    atomic_write_text(out / "metrics.json", json.dumps(metrics, indent=2, sort_keys=True))
     err_mm = 1e3 * metrics["keypoint_err_mean_m"]
     print(
         f"{hand.name}: {kp.shape[0]} frames, keypoint error {err_mm:.1f} mm mean, "

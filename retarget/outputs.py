@@ -1,20 +1,59 @@
 """The files of a run directory: ``robot_trajectory.npz`` (joint positions and servo commands,
-the re-simulated object and forces) and ``metrics.json``, each written atomically (temporary
-file, then rename)."""
+the re-simulated object and forces) and ``metrics.json``, each written atomically (a unique
+temporary file, then rename: :mod:`dexcanvas_core.safe_io`), by one process at a time
+(:func:`open_run_dir`)."""
 
 from __future__ import annotations
 
+import contextlib
 import json
-import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
+from dexcanvas_core.safe_io import atomic_write_text, check_output, output_lock
 from retarget.pipeline import PipelineResult
+
+RUN_FILES = ("robot_trajectory.npz", "metrics.json")
+"""The files that make a directory a run directory (an existing run, for ``--overwrite``)."""
+
+
+@contextlib.contextmanager
+def open_run_dir(
+    out_dir, *, overwrite: bool, what: str = "--out", contents: tuple[str, ...] = RUN_FILES
+) -> Iterator[Path]:
+    """Check run directory ``out_dir`` (:func:`dexcanvas_core.safe_io.check_output`: an
+    existing run without ``overwrite``, a file, a read-only place, a full disk), create it and
+    hold its lock (:func:`dexcanvas_core.safe_io.output_lock`, inside it) while the block
+    runs; yield it as a ``Path``. Directories made here and left empty by an error are removed.
+    ``contents``: the files that make it an existing output (default: a run's).
+
+    Raises:
+        dexcanvas_core.safe_io.OutputError: the checks; ``OutputBusyError`` when another
+            process holds the lock.
+    """
+    out_dir = check_output(out_dir, overwrite=overwrite, kind="dir", what=what, contents=contents)
+    created = [d for d in (out_dir, *out_dir.parents) if not d.exists()]  # leaf first
+    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        with output_lock(out_dir, where="inside"):
+            # again under the lock: a run that finished between the check and the lock
+            check_output(out_dir, overwrite=overwrite, kind="dir", what=what, contents=contents)
+            yield out_dir
+    except BaseException:
+        for d in created:
+            try:
+                d.rmdir()  # only when empty
+            except OSError:
+                break
+        raise
 
 
 def write_run(out_dir: Path, result: PipelineResult, metrics: dict) -> None:
-    """Write ``result``'s trajectory and ``metrics`` into ``out_dir`` (which must exist).
+    """Write ``result``'s trajectory and ``metrics`` into ``out_dir`` (which must exist),
+    holding its lock (:func:`dexcanvas_core.safe_io.output_lock`; re-entrant, so callers
+    holding :func:`open_run_dir` keep it).
 
     >>> import tempfile
     >>> from dexcanvas_core import load_demonstration
@@ -27,8 +66,9 @@ def write_run(out_dir: Path, result: PipelineResult, metrics: dict) -> None:
     >>> np.load(out / "robot_trajectory.npz")["q_command"].shape
     (30, 8)
     """
-    _save(out_dir, result.robot, result.sim, result.refined, result.planned_commands)
-    atomic_write_text(out_dir / "metrics.json", json.dumps(metrics, indent=2, sort_keys=True))
+    with output_lock(out_dir, where="inside"):
+        _save(out_dir, result.robot, result.sim, result.refined, result.planned_commands)
+        atomic_write_text(out_dir / "metrics.json", json.dumps(metrics, indent=2, sort_keys=True))
 
 
 def _save(out_dir: Path, robot, sim, refined=None, planned=None) -> None:
@@ -53,10 +93,3 @@ def _save(out_dir: Path, robot, sim, refined=None, planned=None) -> None:
             "wrist_rot_tracking_err": sim.wrist_rot_err,
         },
     )
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file renamed over it."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)

@@ -31,7 +31,7 @@ from retarget.force_calibration import (
     ForceCalibrationResult,
     calibrate_forces,
 )
-from retarget.hands import get_hand
+from retarget.hands import HandModel, get_hand
 from retarget.loading import load_subject, parse_pair
 from retarget.overrides import build_config
 from retarget.progress import Progress
@@ -70,6 +70,9 @@ class RunConfig:
     """Which of the dataset's demonstrations of this pair (0-based); without a pair, which row."""
     out: Path | None = None
     """Output directory; default ``runs/<hand>_<object>_<type>_<index>``."""
+    overwrite: bool = False
+    """Replace the run in ``out`` (its ``metrics.json``, ``robot_trajectory.npz``); without it
+    a directory holding either is refused before any work."""
     backend: Literal["pinocchio", "mink"] = "pinocchio"
     forces: bool = False
     """Force matching: the robot presses like the human did (``retarget.force_matching``). A
@@ -408,6 +411,16 @@ def check_run(cfg: RunConfig) -> None:
         )
 
 
+def check_options(cfg: RunConfig) -> HandModel:
+    """The checks of ``cfg`` that need no data (:func:`check_run`, the hand, the pair's form and
+    whether the hand can perform it); return the hand. Raises ``RetargetError``."""
+    check_run(cfg)
+    hand = get_hand(cfg.hand)
+    if cfg.pair is not None:  # a pair the hand cannot perform fails before any loading
+        check_pair(hand, parse_pair(cfg.pair, cfg.dataset).manipulation_type)
+    return hand
+
+
 def run_pipeline(cfg: RunConfig) -> PipelineResult:
     """Load the demonstration ``cfg`` names and run :func:`retarget_demonstration` on it with
     ``cfg``'s hand and steps (progress bars on the terminal when ``cfg.progress``).
@@ -420,10 +433,7 @@ def run_pipeline(cfg: RunConfig) -> PipelineResult:
     >>> result.robot.q_command.shape[1], result.trajectory.num_frames
     (8, 736)
     """
-    check_run(cfg)
-    hand = get_hand(cfg.hand)
-    if cfg.pair is not None:  # a pair the hand cannot perform fails before any loading
-        check_pair(hand, parse_pair(cfg.pair, cfg.dataset).manipulation_type)
+    hand = check_options(cfg)
     # The demonstration first: on first use it is built, and the terminal says so at once.
     traj, subject, substituted = load_subject(cfg.pair, cfg.dataset, cfg.index, cfg.progress)
     if cfg.pair is None:  # a row's own type, known only now

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
+
+from dexcanvas_core.safe_io import atomic_path
 
 
 @dataclass
@@ -73,10 +73,9 @@ class RobotTrajectory:
         return float(max(0.0, -d.min())) if d.size else 0.0
 
     def save_npz(self, path, extra: dict[str, np.ndarray] | None = None) -> None:
-        """Write every array (plus ``extra`` ones) to one ``.npz``, atomically (temp + rename)."""
-        path = Path(path)
-        tmp = path.with_name(f".{path.name}.tmp")
-        with open(tmp, "wb") as f:
+        """Write every array (plus ``extra`` ones) to one ``.npz``, atomically (a unique
+        temporary file, then rename: :func:`dexcanvas_core.safe_io.atomic_path`)."""
+        with atomic_path(path) as tmp, open(tmp, "wb") as f:
             np.savez_compressed(
                 f,
                 q=self.q,
@@ -99,4 +98,3 @@ class RobotTrajectory:
                 },
                 **(extra or {}),
             )
-        os.replace(tmp, path)

@@ -10,14 +10,16 @@ without files). It writes into ``out``:
 * ``metrics.json`` — the numbers (success, object errors, keypoint error, hand–object and
   finger–finger penetration, speed).
 
-Both files are written atomically (temporary file, then rename).
+Both files are written atomically (a unique temporary file, then rename), by one process at a
+time (a second run on the same ``out`` is refused while the first holds its lock); an ``out``
+holding a run is refused without ``overwrite``, checked before any work.
 """
 
 from __future__ import annotations
 
 from retarget.metrics import run_metrics
-from retarget.outputs import write_run
-from retarget.pipeline import RunConfig, run_pipeline
+from retarget.outputs import open_run_dir, write_run
+from retarget.pipeline import RunConfig, check_options, run_pipeline
 from retarget.summary import print_summary
 
 __all__ = ["RunConfig", "run_retarget"]
@@ -30,6 +32,9 @@ def run_retarget(cfg: RunConfig) -> dict:
     Raises:
         RetargetError: bad options, an unknown hand or pair, a missing demonstration, human
             forces the force pipeline could not produce.
+        dexcanvas_core.safe_io.OutputError: ``cfg.out`` holds a run and ``cfg.overwrite`` is
+            false, cannot be written, is a file, or another process is writing it (checked
+            before any work).
 
     >>> import os, tempfile
     >>> out = tempfile.mkdtemp()
@@ -37,11 +42,11 @@ def run_retarget(cfg: RunConfig) -> dict:
     >>> m["hand"], m["pair"], sorted(os.listdir(out))
     ('panda', 'cube2/tripod', ['metrics.json', 'robot_trajectory.npz'])
     """
-    result = run_pipeline(cfg)
-    out_dir = cfg.output_dir()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    metrics = run_metrics(result, cfg)
-    write_run(out_dir, result, metrics)
+    check_options(cfg)  # bad options before the output directory is made
+    with open_run_dir(cfg.output_dir(), overwrite=cfg.overwrite) as out_dir:
+        result = run_pipeline(cfg)
+        metrics = run_metrics(result, cfg)
+        write_run(out_dir, result, metrics)
     if cfg.progress:
         print_summary(metrics, out_dir)
     return metrics

@@ -15,6 +15,7 @@ import mujoco
 import numpy as np
 
 from dexcanvas_core.rotations import aa_to_quat_wxyz
+from dexcanvas_core.sim import mujoco_log  # noqa: F401 (MuJoCo's warnings to logging, not a file)
 from dexcanvas_core.sim.scene import OBJECT_BODY, TABLE_GEOM, add_object, add_table
 from dexcanvas_core.table import DEFAULT_TABLE, Table, table_of
 from retarget.errors import RetargetError

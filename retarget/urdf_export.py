@@ -24,6 +24,7 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from dexcanvas_core.safe_io import atomic_write_text
 from retarget.errors import RetargetError
 from retarget.hands.build import coupling_tendons
 
@@ -286,8 +287,7 @@ def export_urdf(
             "",
         ]
     )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(xml)
+    atomic_write_text(path, xml)
     return UrdfExport(
         path=path,
         joint_names=joint_order,

@@ -29,6 +29,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from dexcanvas_core.rotations import aa_to_quat_wxyz, quat_wxyz_to_aa, rotation_angle_between_aa
+from dexcanvas_core.sim import mujoco_log  # noqa: F401 (MuJoCo's warnings to logging, not a file)
 from dexcanvas_core.sim.forces import object_contacts
 from dexcanvas_core.sim.scene import OBJECT_ANCHOR, OBJECT_HOLD, add_object_hold
 from dexcanvas_core.sim.support import hold_until_frame

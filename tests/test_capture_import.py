@@ -14,7 +14,7 @@ import trimesh
 from dexcanvas_core.capture import ImportConfig, capture_from_arrays, run_import
 from dexcanvas_core.capture.export import write_mano_npz
 from dexcanvas_core.capture.world import rotation_to_z_up, up_vector
-from dexcanvas_core.errors import DatasetError, ValidationError
+from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.io import open_dataset
 from dexcanvas_core.keypoints import convert_keypoints
 from dexcanvas_core.mano import ManoLayer, mirror_axis_angle
@@ -25,6 +25,7 @@ from dexcanvas_core.rotations import (
     matrix_to_quat_wxyz,
     quat_wxyz_to_matrix,
 )
+from dexcanvas_core.safe_io import OutputExistsError
 from dexcanvas_core.taxonomy import clear_objects
 
 T = 40
@@ -226,7 +227,7 @@ def test_missing_mesh_file_and_no_mass(tmp_path):
     assert not (tmp_path / "D.lance").exists() and not (tmp_path / "D.lance.objects").exists()
     res = run_import(ImportConfig(**{**cfg.__dict__, "density": 400.0}))
     assert res.objects["testbox"]["mass_kg"] == pytest.approx(400.0 * EDGE**3, rel=1e-3)
-    with pytest.raises(DatasetError, match="--overwrite"):
+    with pytest.raises(OutputExistsError, match="--overwrite"):
         run_import(ImportConfig(**{**cfg.__dict__, "density": 400.0}))
 
 

@@ -48,6 +48,7 @@ from dexcanvas_core.mocap.layout import (
     hand_marker_rest_positions,
 )
 from dexcanvas_core.rotations import aa_to_matrix, rotation_angle_between_aa
+from dexcanvas_core.safe_io import OutputExistsError
 from dexcanvas_core.taxonomy import OBJECTS
 from dexcanvas_core.trajectory import HandTrack, ObjectMove, ObjectTrack, Trajectory
 
@@ -387,7 +388,7 @@ def test_run_fit_writes_a_dataset_with_flags(demo, tmp_path):
     assert report.flags["frames_interpolated"] == int(flags.interpolated.sum())
     err = np.linalg.norm(traj.hand.joint_pos - demo.hand.joint_pos, axis=-1) * 1000
     assert err.mean() < 1.5
-    with pytest.raises(ValidationError, match="already exists"):
+    with pytest.raises(OutputExistsError, match="already exists"):
         run_fit(cfg)
 
 

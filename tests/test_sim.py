@@ -11,10 +11,11 @@ import pytest
 
 from dexcanvas_core.cli import main as dexcanvas_main
 from dexcanvas_core.demos import generate_demo
-from dexcanvas_core.errors import DatasetError, ValidationError
+from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.io import open_dataset, write_dataset
 from dexcanvas_core.mano.skeleton import HandSkeleton
 from dexcanvas_core.objects.geometry import object_geometry
+from dexcanvas_core.safe_io import OutputExistsError
 from dexcanvas_core.sim.forces import read_contacts
 from dexcanvas_core.sim.grip import balanced_forces, squeeze_offsets
 from dexcanvas_core.sim.hand import (
@@ -394,7 +395,7 @@ def test_synthesize_refuses_existing_output(tmp_path, demo):
     from dexcanvas_core.sim.run import SynthesizeConfig, run_synthesize
 
     (tmp_path / "o.lance").mkdir()
-    with pytest.raises(DatasetError, match="overwrite"):
+    with pytest.raises(OutputExistsError, match="overwrite"):
         run_synthesize(SynthesizeConfig(dataset=tmp_path / "x", out=tmp_path / "o.lance"))
 
 

@@ -29,7 +29,8 @@ from pathlib import Path
 import numpy as np
 
 import dexcanvas_core
-from benchmarks._common import atomic_write_bytes, atomic_write_json
+from benchmarks._common import atomic_write_json
+from dexcanvas_core.safe_io import atomic_write_bytes
 from dexcanvas_core.table import Table
 from dexcanvas_core.trajectory import Contacts, HandTrack, ObjectMove, ObjectTrack, Trajectory
 from retarget.pipeline import human_sim_config

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +14,7 @@ from benchmarks.force_preservation.config import (
     TARGET_SUCCESS,
     VARIANTS,
 )
+from dexcanvas_core.safe_io import atomic_path
 from retarget.pipeline import HUMAN_REPLAY_SEED
 
 
@@ -80,11 +80,9 @@ def plot_success(
     if ceilings:
         _plot_ceiling(ax2, names, ceilings)
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    fig.savefig(tmp, dpi=120, bbox_inches="tight")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, bbox_inches="tight", format=path.suffix.lstrip(".") or "png")
     plt.close(fig)
-    os.replace(tmp, path)
     return path
 
 

@@ -10,9 +10,6 @@ import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from benchmarks._common import (
-    atomic_write_text,
-)
 from benchmarks.real_motion.config import CAPTURE_SETS, DEXYCB_ITEMS, stress_motions
 from dexcanvas_core.capture import ImportConfig, run_import, use_dataset_objects
 from dexcanvas_core.capture.export import geometry_mesh, trajectory_to_arrays, write_mano_npz
@@ -22,6 +19,7 @@ from dexcanvas_core.io import open_dataset
 from dexcanvas_core.loaders.selection import load_demonstration
 from dexcanvas_core.objects.geometry import object_geometry
 from dexcanvas_core.objects.mesh import load_object_mesh
+from dexcanvas_core.safe_io import atomic_write_text
 from dexcanvas_core.safe_pickle import load_pickle  # comes with the ho3d reader
 
 

@@ -16,7 +16,6 @@ from rich.markup import escape
 import benchmarks.real_motion as package  # the command's description
 from benchmarks._common import (
     atomic_write_json,
-    atomic_write_text,
     command_line,
     git_commit,
     machine_info,
@@ -44,6 +43,7 @@ from benchmarks.real_motion.config import (
 )
 from benchmarks.real_motion.jobs import JobStore, Scheduler, plan_jobs
 from benchmarks.real_motion.tables import page_markdown, print_tables
+from dexcanvas_core.safe_io import atomic_write_text
 
 
 def run_benchmark(cfg: BenchConfig, console=None) -> dict:

@@ -22,7 +22,6 @@ from rich.progress import (
 )
 
 from benchmarks._common import (
-    atomic_write_text,
     json_default,
     worker_pool,
 )
@@ -31,6 +30,7 @@ from benchmarks.real_motion.cases import Case, slug
 from benchmarks.real_motion.config import MANO, MODES
 from dexcanvas_core.capture import use_dataset_objects
 from dexcanvas_core.io import open_dataset
+from dexcanvas_core.safe_io import atomic_write_text
 from dexcanvas_core.sim.run import SimulateConfig, run_simulate
 from retarget.run import RunConfig, run_retarget
 
@@ -147,6 +147,7 @@ def _run_retarget(spec: dict, case: Case, run_dir: Path) -> dict:
             forces=forces,
             refine=mode == "forces_refine",
             out=run_dir,
+            overwrite=True,  # the job's own directory: a rerun replaces its earlier attempt
             progress=False,
         )
     )

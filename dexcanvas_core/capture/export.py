@@ -13,6 +13,7 @@ import numpy as np
 
 from dexcanvas_core.keypoints import convert_keypoints
 from dexcanvas_core.rotations import aa_to_matrix, aa_to_quat_wxyz
+from dexcanvas_core.safe_io import atomic_path
 from dexcanvas_core.table import table_of
 from dexcanvas_core.trajectory import Trajectory
 
@@ -90,10 +91,6 @@ def trajectory_to_arrays(
 def write_mano_npz(path: str | os.PathLike, arrays: dict[str, np.ndarray]) -> Path:
     """Write ``arrays`` as an ``.npz`` (no pickles), atomically."""
     p = Path(path).expanduser()
-    tmp = p.with_name(f".{p.name}.tmp-{os.getpid()}.npz")
-    try:
-        np.savez(tmp, **arrays)
-        os.replace(tmp, p)
-    finally:
-        tmp.unlink(missing_ok=True)
+    with atomic_path(p) as tmp, open(tmp, "wb") as fh:
+        np.savez(fh, **arrays)
     return p

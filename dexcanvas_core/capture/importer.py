@@ -31,10 +31,11 @@ from dexcanvas_core.capture.arrays import capture_from_arrays
 from dexcanvas_core.capture.capture import Capture
 from dexcanvas_core.capture.convert import DEFAULT_FPS, capture_to_trajectory
 from dexcanvas_core.capture.formats import READERS, reader_for
-from dexcanvas_core.errors import DatasetError, UnknownNameError, ValidationError
+from dexcanvas_core.errors import UnknownNameError, ValidationError
 from dexcanvas_core.io import write_dataset
 from dexcanvas_core.objects.manifest import check_mass, read_manifest
 from dexcanvas_core.objects.mesh import load_object_mesh
+from dexcanvas_core.safe_io import check_output
 from dexcanvas_core.taxonomy.object_lookup import add_objects_manifest, catalogue_spec, use_objects
 
 log = logging.getLogger(__name__)
@@ -222,15 +223,13 @@ def run_import(cfg: ImportConfig, progress: Callable[[int, int], None] | None = 
 
     Raises:
         ValidationError: a bad capture, mesh or mass (nothing is written).
-        DatasetError: the output exists and ``overwrite`` is not set.
+        dexcanvas_core.safe_io.OutputError: the output (or its objects folder) exists and
+            ``overwrite`` is not set, or cannot be written.
     """
     out = Path(cfg.out).expanduser()
     objects_dir = out.with_name(out.name + OBJECTS_SUFFIX)
-    if (out.exists() or objects_dir.exists()) and not cfg.overwrite:
-        raise DatasetError(
-            "already exists; pass --overwrite to replace it (its objects folder too)",
-            dataset=str(out),
-        )
+    check_output(out, overwrite=cfg.overwrite, kind="dir")
+    check_output(objects_dir, overwrite=cfg.overwrite, kind="dir", what="objects folder")
     if cfg.fps is not None and not (1.0 <= cfg.fps <= 2000.0):
         raise ValidationError(f"--fps must be in [1, 2000] Hz, got {cfg.fps:g}", field="fps")
     if cfg.density is not None and not (5.0 <= cfg.density <= 25_000.0):

@@ -25,6 +25,7 @@ from dexcanvas_core.demos.feasibility import feasibility, feasible_pairs
 from dexcanvas_core.demos.operators import OPERATORS
 from dexcanvas_core.errors import DatasetError, ValidationError
 from dexcanvas_core.io import write_dataset
+from dexcanvas_core.safe_io import atomic_write_text, check_output
 from dexcanvas_core.taxonomy import Pair
 
 log = logging.getLogger(__name__)
@@ -62,11 +63,7 @@ class BuildConfig:
                 raise ValidationError("pairs is empty; give at least one or None for all")
             for p in self.pairs:
                 Pair.parse(p)  # raises UnknownNameError / ValidationError with suggestions
-        out = Path(self.out).expanduser()
-        if out.exists() and not self.overwrite:
-            raise DatasetError(
-                "already exists; pass overwrite=True (--overwrite) to replace it", dataset=str(out)
-            )
+        check_output(self.out, overwrite=self.overwrite, kind="dir")
         return self
 
 
@@ -123,11 +120,8 @@ class BuildReport:
     def write_json(self, path: str | os.PathLike | None = None) -> Path:
         """Write the report as JSON (default: ``<out>.report.json`` next to the dataset)."""
         dest = Path(path) if path is not None else report_path(self.out)
-        dest.parent.mkdir(parents=True, exist_ok=True)
-        tmp = dest.with_name(f".{dest.name}.tmp-{os.getpid()}")
-        tmp.write_text(json.dumps(self.to_dict(), indent=2, default=_json_default))
-        os.replace(tmp, dest)  # atomic: readers see the old report or the new one
-        return dest
+        # atomic: readers see the old report or the new one
+        return atomic_write_text(dest, json.dumps(self.to_dict(), indent=2, default=_json_default))
 
     def lines(self) -> list[str]:
         """A short human-readable summary (the CLI prints it)."""
@@ -278,8 +272,7 @@ def build_demos(
         raise ValidationError(f"reps must be an integer ≥ 1, got {reps!r}", field="reps")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValidationError(f"seed must be an integer ≥ 0, got {seed!r}", field="seed")
-    if out.exists() and not overwrite:
-        raise DatasetError("already exists; pass overwrite=True to replace it", dataset=str(out))
+    check_output(out, overwrite=overwrite, kind="dir")
     report = BuildReport(out=out)
     selected: list[Pair] = []
     for item in pairs if pairs is not None else feasible_pairs():

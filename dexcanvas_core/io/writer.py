@@ -7,7 +7,8 @@ encoding is :mod:`.encode`).
 
 Writes are atomic: a new dataset is written next to the destination and renamed into place, so a
 crash leaves either the old dataset or none, never a partial one. Appends use Lance's own
-atomic commits.
+atomic commits. One process writes a destination at a time (its
+:func:`~dexcanvas_core.safe_io.output_lock`; a second gets ``OutputBusyError``).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from dexcanvas_core.errors import DatasetError
 from dexcanvas_core.io.encode import schema_for, trajectories_to_batch
 from dexcanvas_core.io.reader import open_dataset
 from dexcanvas_core.io.schema import SCHEMA_VERSION, SCHEMA_VERSION_KEY
+from dexcanvas_core.safe_io import atomic_path, check_output, output_lock
 from dexcanvas_core.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -104,11 +106,17 @@ def write_dataset(
             source layout. Default: the toolkit's layout fitted to the first trajectory.
         validate: run ``Trajectory.validate()`` on every row before writing.
     """
-    import lance
-
     dest = Path(path).expanduser()
     if mode not in ("create", "overwrite", "append"):
         raise DatasetError(f"unknown write mode {mode!r}; use create, overwrite or append")
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    with output_lock(dest):  # one writer per dataset (OutputBusyError for a second one)
+        return _write_dataset(trajectories, dest, mode, schema, batch_rows, validate)
+
+
+def _write_dataset(trajectories, dest: Path, mode, schema, batch_rows, validate) -> Path:
+    import lance
+
     if mode == "create" and dest.exists():
         raise DatasetError("already exists; pass mode='overwrite' to replace it", dataset=str(dest))
     if mode == "append":
@@ -123,7 +131,6 @@ def write_dataset(
         return dest
     enc = _Encoder()
     schema, batches = _batches(trajectories, schema, batch_rows, validate, enc)
-    dest.parent.mkdir(parents=True, exist_ok=True)
     tmp = dest.with_name(f".{dest.name}.tmp-{uuidlib.uuid4().hex[:8]}")
     try:
         _lance_write(lance, pa.RecordBatchReader.from_batches(schema, batches), tmp, "create", enc)
@@ -165,21 +172,22 @@ def export_parquet(
     *,
     filter: str | None = None,
     batch_size: int = 16,
+    overwrite: bool = False,
 ) -> Path:
-    """Copy a Lance dataset (optionally filtered) to one Parquet file, streaming and atomic."""
+    """Copy a Lance dataset (optionally filtered) to one Parquet file, streaming and atomic
+    (:func:`dexcanvas_core.safe_io.atomic_path`, under the file's :func:`output_lock`).
+
+    Raises:
+        dexcanvas_core.safe_io.OutputError: ``dest`` exists and ``overwrite`` is false, is a
+            directory, or cannot be written (checked before reading anything).
+    """
     import pyarrow.parquet as pq
 
+    dest = check_output(dest, overwrite=overwrite, kind="file", what="--parquet")
     ds = open_dataset(source)
-    dest = Path(dest).expanduser()
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    tmp = dest.with_name(f".{dest.name}.tmp-{uuidlib.uuid4().hex[:8]}")
     schema = ds.schema
-    try:
+    with output_lock(dest), atomic_path(dest) as tmp:
         with pq.ParquetWriter(str(tmp), schema) as w:
             for batch in ds.iter_batches(filter=filter, batch_size=batch_size):
                 w.write_batch(batch.select(schema.names))
-        os.replace(tmp, dest)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return dest

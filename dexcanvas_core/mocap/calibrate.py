@@ -47,6 +47,7 @@ from dexcanvas_core.mocap.layout import (
 )
 from dexcanvas_core.mocap.model import N_PARAMS, HandMarkerModel, NormalEquations
 from dexcanvas_core.mocap.sequence import fit_sequence
+from dexcanvas_core.safe_io import atomic_write_text
 
 log = logging.getLogger(__name__)
 
@@ -125,9 +126,7 @@ class SubjectCalibration:
         )
 
     def save(self, path: str | Path) -> Path:
-        p = Path(path)
-        p.write_text(json.dumps(self.to_dict(), indent=2))
-        return p
+        return atomic_write_text(path, json.dumps(self.to_dict(), indent=2))
 
     @classmethod
     def load(cls, path: str | Path) -> SubjectCalibration:

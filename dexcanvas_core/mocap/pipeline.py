@@ -63,6 +63,7 @@ from dexcanvas_core.mocap.results import FIT_INFO_COLUMN, FIT_QUALITY_COLUMN, Fi
 from dexcanvas_core.mocap.stages import MarkerDataError, fit_hand, fit_object
 from dexcanvas_core.mocap.stream import MarkerStream
 from dexcanvas_core.rotations import rotation_angle_between_aa
+from dexcanvas_core.safe_io import check_output
 from dexcanvas_core.taxonomy import object_spec
 from dexcanvas_core.trajectory import HandTrack, ObjectMove, ObjectTrack, Trajectory
 
@@ -293,11 +294,9 @@ class FitConfig:
     def validate(self) -> FitConfig:
         if not Path(self.markers).exists():
             raise ValidationError(f"marker file {self.markers} does not exist", field="markers")
-        if Path(self.out).exists() and not self.overwrite:
-            raise ValidationError(
-                f"{self.out} already exists; pass overwrite=True (--overwrite) to replace it",
-                field="out",
-            )
+        check_output(self.out, overwrite=self.overwrite, kind="dir")
+        if self.save_calibration is not None:
+            check_output(self.save_calibration, overwrite=self.overwrite, what="--save-calibration")
         if self.fps is not None and not (math.isfinite(self.fps) and self.fps > 0):
             raise ValidationError(f"fps must be > 0, got {self.fps}", field="fps")
         self.options.validate()

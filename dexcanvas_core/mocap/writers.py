@@ -15,6 +15,7 @@ import numpy as np
 from dexcanvas_core.errors import MissingDependencyError
 from dexcanvas_core.mocap.frames import UNITS_M
 from dexcanvas_core.mocap.stream import MarkerStream
+from dexcanvas_core.safe_io import atomic_path
 
 
 def _unit_name(unit_m: float) -> str:
@@ -40,7 +41,8 @@ def write_c3d(stream: MarkerStream, path: str | Path, labels: list[str] | None =
     pts = np.ones((4, M, T))
     pts[:3] = np.transpose(stream.positions, (2, 1, 0))
     c["data"]["points"] = pts
-    c.write(str(p))
+    with atomic_path(p, suffix=".c3d") as tmp:
+        c.write(str(tmp))
     return p
 
 
@@ -61,7 +63,7 @@ def write_csv(
     def cell(v: float) -> str:
         return "" if not np.isfinite(v) else f"{v:.6f}"
 
-    with p.open("w", newline="") as fh:
+    with atomic_path(p) as tmp, tmp.open("w", newline="") as fh:
         fh.write(f"# units: {unit}\n# fps: {stream.fps:g}\n")
         w = csv.writer(fh)
         if layout == "wide":

@@ -37,6 +37,7 @@ from dexcanvas_core.cache import cache_dir
 from dexcanvas_core.errors import MissingDependencyError, ValidationError
 from dexcanvas_core.objects.parts import ConvexPart
 from dexcanvas_core.objects.sdf import SdfGrid
+from dexcanvas_core.safe_io import atomic_path
 
 log = logging.getLogger(__name__)
 
@@ -255,9 +256,6 @@ def mesh_collision(mesh: ObjectMesh) -> MeshCollision:
         planes=sdf.planes,
         part_of_plane=sdf.part_of_plane,
     )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as fh:
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         np.savez_compressed(fh, **arrays)
-    os.replace(tmp, path)
     return MeshCollision(parts, sdf)

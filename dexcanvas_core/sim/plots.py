@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from dexcanvas_core.errors import MissingDependencyError
+from dexcanvas_core.safe_io import atomic_path
 from dexcanvas_core.sim.physics import GRAVITY
 from dexcanvas_core.trajectory import FORCE_GROUPS
 
@@ -62,6 +63,7 @@ def plot_finger_forces(result, path: str | Path, title: str = "") -> Path:
     ax2.set_xlabel("time [s]")
     fig.tight_layout()
     path = Path(path)
-    fig.savefig(path, dpi=110)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".") or "png")
     plt.close(fig)
     return path

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import shutil
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -25,16 +24,11 @@ import numpy as np
 from dexcanvas_core.errors import DatasetError, MissingDependencyError, UnknownNameError
 from dexcanvas_core.io import open_dataset, write_dataset
 from dexcanvas_core.loaders.selection import load_demonstration, load_row, subject_of
+from dexcanvas_core.safe_io import atomic_write_text, check_output, output_lock
 from dexcanvas_core.sim.pipeline import SimConfig, simulate
 from dexcanvas_core.sim.plots import plot_finger_forces
 from dexcanvas_core.sim.synthesis import PerturbationRanges, synthesize_one
 from dexcanvas_core.taxonomy import object_spec
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 @dataclass(frozen=True)
@@ -52,19 +46,16 @@ class SimulateConfig:
     plot: bool = True
 
 
-def _check_out(out: Path, overwrite: bool) -> None:
-    if out.exists() and not overwrite:
-        raise DatasetError(
-            f"{out} already exists; pass --overwrite to replace it", dataset=str(out)
-        )
-
-
 def run_simulate(cfg: SimulateConfig) -> dict:
     """Track one demonstration, write the dataset, metrics and plot; return the metrics."""
+    out = check_output(cfg.out, overwrite=cfg.overwrite, kind="dir")
+    with output_lock(out):
+        return _simulate(cfg, out)
+
+
+def _simulate(cfg: SimulateConfig, out: Path) -> dict:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
-    out = Path(cfg.out)
-    _check_out(out, cfg.overwrite)
     cfg.sim.validate()
     if cfg.pair is not None:
         traj = load_demonstration(cfg.pair, cfg.index, cfg.dataset)
@@ -86,7 +77,7 @@ def run_simulate(cfg: SimulateConfig) -> dict:
         res = simulate(traj, cfg.sim)
     write_dataset([res.trajectory], out, mode="overwrite" if cfg.overwrite else "create")
     metrics = {**res.metrics, "pair": label, "dataset": str(cfg.dataset or "built-in")}
-    _atomic_write_text(
+    atomic_write_text(
         out.with_name(out.name + ".metrics.json"),
         json.dumps(metrics, indent=2, sort_keys=True, default=float),
     )
@@ -183,7 +174,7 @@ def _synth_row(args) -> tuple[str, int, list[dict]]:
     part = Path(work) / f"{traj.uuid}.lance"
     if kept:
         write_dataset(kept, part, mode="overwrite")
-    _atomic_write_text(
+    atomic_write_text(
         Path(work) / f"{traj.uuid}.json", json.dumps(reports, sort_keys=True, default=float)
     )
     return traj.uuid, len(kept), reports
@@ -209,8 +200,6 @@ def check_objects_known(object_ids, dataset: str) -> None:
 
 def run_synthesize(cfg: SynthesizeConfig) -> dict:
     """Expand ``dataset`` ``expand``× (module docstring); return a summary."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
-
     if cfg.expand < 1:
         raise DatasetError("--expand must be at least 1")
     if cfg.limit is not None and cfg.limit < 1:
@@ -218,8 +207,14 @@ def run_synthesize(cfg: SynthesizeConfig) -> dict:
             f"--limit must be at least 1 (the number of source rows to expand), got {cfg.limit}; "
             "leave it out to expand every row"
         )
-    out = Path(cfg.out)
-    _check_out(out, cfg.overwrite)
+    out = check_output(cfg.out, overwrite=cfg.overwrite, kind="dir")
+    with output_lock(out):
+        return _synthesize(cfg, out)
+
+
+def _synthesize(cfg: SynthesizeConfig, out: Path) -> dict:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
     cfg.sim.validate()
     src = open_dataset(cfg.dataset)
     meta = src.scan_metadata()
@@ -239,7 +234,7 @@ def run_synthesize(cfg: SynthesizeConfig) -> dict:
             "same settings to resume",
             dataset=str(work),
         )
-    _atomic_write_text(stamp, json.dumps(settings, sort_keys=True))
+    atomic_write_text(stamp, json.dumps(settings, sort_keys=True))
     todo = [p for p in positions if not (work / f"{uuids[p]}.json").exists()]
     jobs = [
         (str(cfg.dataset), p, cfg.expand, cfg.seed, cfg.sim, cfg.ranges, str(work)) for p in todo
@@ -281,7 +276,7 @@ def run_synthesize(cfg: SynthesizeConfig) -> dict:
         "success_rate": len(kept) / max(1, len(reports)),
         "out": str(out),
     }
-    _atomic_write_text(
+    atomic_write_text(
         out.with_name(out.name + ".report.json"),
         json.dumps({"summary": summary, "rollouts": reports}, indent=1, default=float),
     )

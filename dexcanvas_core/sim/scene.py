@@ -27,6 +27,7 @@ from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.keypoints import FINGERS
 from dexcanvas_core.mano.skeleton import HandSkeleton
 from dexcanvas_core.rotations import aa_to_quat_wxyz
+from dexcanvas_core.sim import mujoco_log  # noqa: F401 (MuJoCo's warnings to logging, not a file)
 from dexcanvas_core.sim.hand import SimHand, add_hand
 from dexcanvas_core.table import DEFAULT_TABLE, Table
 

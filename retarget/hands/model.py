@@ -17,6 +17,7 @@ import mujoco
 import numpy as np
 
 from dexcanvas_core.keypoints import FINGERS, MANO21
+from dexcanvas_core.sim import mujoco_log  # noqa: F401 (MuJoCo's warnings to logging, not a file)
 from retarget.errors import HandModelError
 from retarget.hands.base import (
     HUMAN_FINGERS,

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dexcanvas_core.safe_io import atomic_path
 from retarget.viz import style
 
 MIN_CONTENT_FRACTION = 0.01
@@ -36,4 +37,5 @@ def caption(png: Path, lines: list[str]) -> None:
     for line in lines:
         draw.text((8, y), line, fill=(30, 30, 30), font=font)
         y += int(size * 1.35)
-    img.save(png)
+    with atomic_path(png) as tmp:
+        img.save(tmp, format="PNG")

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from dexcanvas_core.keypoints import FINGERS
+from dexcanvas_core.safe_io import atomic_path
 from dexcanvas_core.taxonomy.manipulation import MANIPULATION_TYPES
 from dexcanvas_core.trajectory import CONTACT_PARTS, FORCE_GROUPS
 from retarget.viz import style
@@ -46,13 +47,14 @@ def _save(fig, out: Path) -> Path:
     out = Path(out)
     if out.suffix.lower() not in FORMATS:
         raise VizError(f"plot file {out.name!r}: use one of {', '.join(FORMATS)}")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(
-        out,
-        dpi=DPI,
-        bbox_inches="tight",
-        metadata={"Date": None} if out.suffix.lower() == ".svg" else None,
-    )
+    with atomic_path(out) as tmp:
+        fig.savefig(
+            tmp,
+            format=out.suffix.lower().lstrip("."),
+            dpi=DPI,
+            bbox_inches="tight",
+            metadata={"Date": None} if out.suffix.lower() == ".svg" else None,
+        )
     _pyplot().close(fig)
     return out
 

@@ -23,6 +23,7 @@ import numpy as np
 
 from dexcanvas_core.errors import DexCanvasError
 from dexcanvas_core.objects.geometry import object_geometry
+from dexcanvas_core.safe_io import atomic_write_text, check_output, output_lock
 from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S
 from retarget.force_scores import REACH_M
 from retarget.hands import get_hand
@@ -53,6 +54,8 @@ class ReportConfig:
     """Render stills into a run directory that has none (``retarget snapshot``'s defaults)."""
     renderer: Literal["auto", "chromium", "mujoco"] = "auto"
     plot_format: Literal["png", "svg"] = "png"
+    overwrite: bool = False
+    """Replace an existing report file; without it one is refused before any work."""
 
     def validate(self) -> ReportConfig:
         if not self.run_dirs:
@@ -163,15 +166,16 @@ def _section(run_dir: Path, cfg: ReportConfig) -> RunSection:
         try:
             renderer = check_renderer(cfg.renderer)
             data = scene_data(run, human, hand=hand, sim=sim)
-            draw(
-                hand,
-                data,
-                choose_frames(scfg, run.num_frames),
-                run.run_dir,
-                cfg=scfg,
-                renderer=renderer,
-                run_dir=run.run_dir,
-            )
+            with output_lock(run.run_dir, where="inside"):
+                draw(
+                    hand,
+                    data,
+                    choose_frames(scfg, run.num_frames),
+                    run.run_dir,
+                    cfg=scfg,
+                    renderer=renderer,
+                    run_dir=run.run_dir,
+                )
             manifest = _read_manifest(run.run_dir)
         except RendererUnavailableError as e:
             sec.notes.append(f"no stills: {e}")
@@ -230,7 +234,7 @@ def run_report(cfg: ReportConfig) -> Path:
     """Write the report (module docstring); return its path."""
     cfg = cfg.validate()
     require("matplotlib", "PIL", *(["meshcat"] if cfg.snapshots else []))
-    out = cfg.output_path()
+    out = check_output(cfg.output_path(), overwrite=cfg.overwrite, kind="file")
     sections = [_section(Path(d), cfg) for d in cfg.run_dirs]
     heatmap = None
     entries = [s.heatmap_entry for s in sections if s.heatmap_entry is not None]
@@ -241,11 +245,8 @@ def run_report(cfg: ReportConfig) -> Path:
             else sections[0].run_dir / PLOTS_DIR / f"contact_heatmap.{cfg.plot_format}",
             entries,
         )
-    out.parent.mkdir(parents=True, exist_ok=True)
-    page = render_html(sections, heatmap, out)
-    tmp = out.with_name(f".{out.name}.tmp")
-    tmp.write_text(page)
-    os.replace(tmp, out)
+    with output_lock(out):
+        atomic_write_text(out, render_html(sections, heatmap, out))
     return out
 
 

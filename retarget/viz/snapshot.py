@@ -31,8 +31,10 @@ from typing import Literal
 import numpy as np
 
 from dexcanvas_core.objects.geometry import object_geometry
+from dexcanvas_core.safe_io import atomic_write_text
 from retarget.hands import get_hand
 from retarget.loading import load_subject
+from retarget.outputs import RUN_FILES, open_run_dir
 from retarget.pipeline import RunConfig, check_pair
 from retarget.run import run_retarget
 from retarget.viz import chromium, images, mujoco_render
@@ -86,6 +88,10 @@ class SnapshotConfig:
     """Also write ``scene.html`` (the animated meshcat scene)."""
     backend: Literal["pinocchio", "mink"] = "pinocchio"
     """IK backend when retargeting."""
+    overwrite: bool = False
+    """Replace the stills (``snapshots.json``) and, when retargeting, the run already in
+    ``out``; without it either is refused before any work. Stills of a run into its own
+    directory (``out == run_dir``) do not replace the run."""
     progress: bool = True
 
     def validate(self) -> SnapshotConfig:
@@ -263,6 +269,7 @@ def _prepare(cfg: SnapshotConfig) -> tuple[RunFiles, object, list[int]]:
         dataset=cfg.dataset,
         index=cfg.index,
         out=cfg.out,
+        overwrite=cfg.overwrite,
         backend=cfg.backend,
         progress=cfg.progress,
     )
@@ -282,7 +289,13 @@ def run_snapshot(cfg: SnapshotConfig) -> dict:
     cfg = cfg.validate()
     require("meshcat", "PIL")
     renderer = check_renderer(cfg.renderer)  # fail before the long part
-    out_dir = Path(cfg.out)  # made by draw(), once the run has loaded
+    # The stills' directory: a run too when retargeting into it; one writer at a time.
+    contents = (MANIFEST,) if cfg.run_dir is not None else (MANIFEST, *RUN_FILES)
+    with open_run_dir(cfg.out, overwrite=cfg.overwrite, contents=contents) as out_dir:
+        return _snapshot(cfg, renderer, out_dir)
+
+
+def _snapshot(cfg: SnapshotConfig, renderer: str, out_dir: Path) -> dict:
     run, human, frames = _prepare(cfg)
     hand = get_hand(run.metrics["hand"])
     sim = None
@@ -331,7 +344,7 @@ def draw(
                         used = "mujoco"
                 if cfg.scene_html:
                     animation = scene.animate()  # real time: keyframe stride and clip fps
-                    _atomic_write(out_dir / SCENE_HTML, vis.static_html())
+                    atomic_write_text(out_dir / SCENE_HTML, vis.static_html())
             finally:
                 vis.window.close()
     if used == "mujoco":
@@ -355,7 +368,7 @@ def draw(
         "animation": animation,
         "options": {k: v for k, v in asdict(options).items() if k != "camera"},
     }
-    _atomic_write(out_dir / MANIFEST, json.dumps(manifest, indent=2))
+    atomic_write_text(out_dir / MANIFEST, json.dumps(manifest, indent=2))
     return manifest
 
 
@@ -376,21 +389,22 @@ def _caption_lines(data: SceneData, t: int, options: SceneOptions) -> list[str]:
     return [f"{data.hand_name} · {data.pair} · frame {t} ({time_s:.2f} s)", where]
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def snapshot_run(
-    run_dir: Path, *, frames=None, renderer: str = "auto", progress: bool = False
+    run_dir: Path,
+    *,
+    frames=None,
+    renderer: str = "auto",
+    overwrite: bool = False,
+    progress: bool = False,
 ) -> dict:
-    """Stills of an existing run into the run directory itself (``retarget run --snapshot``)."""
+    """Stills of an existing run into the run directory itself (``retarget run --snapshot``);
+    ``overwrite``: replace stills it already has."""
     cfg = SnapshotConfig(
         out=Path(run_dir),
         run_dir=Path(run_dir),
         renderer=renderer,
         frames=frames,
+        overwrite=overwrite,
         progress=progress,
     )
     return run_snapshot(cfg)
