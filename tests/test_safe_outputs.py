@@ -277,7 +277,7 @@ def test_export_overwrite(example, tmp_path, capsys):
     assert dexcanvas_cli.main([*args, "--overwrite"]) == 0
     assert pq.read_table(out).num_rows == 18
     assert dexcanvas_cli.main(["export", str(example), "--parquet", str(tmp_path)]) == 2
-    assert "is a directory; give a file name" in capsys.readouterr().err
+    assert "is a directory; give the path of a file" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x.parquet"]
 
 
