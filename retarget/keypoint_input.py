@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +19,7 @@ import numpy as np
 
 from dexcanvas_core.keypoints import MANO21, convert_keypoints
 from dexcanvas_core.mano import HandSkeleton
+from dexcanvas_core.plausibility import check_fps, check_keypoint_sequence
 from dexcanvas_core.rotations import matrix_to_aa
 from dexcanvas_core.trajectory import HandTrack, Trajectory
 from retarget.errors import RetargetError
@@ -66,13 +68,12 @@ def keypoints_to_trajectory(
         order: ``"mano21"`` or ``"openpose21"``.
     """
     kp = np.asarray(keypoints, dtype=np.float64)
-    if kp.ndim != 3 or kp.shape[1:] != (21, 3):
-        raise RetargetError(f"keypoints must have shape (T, 21, 3), got {kp.shape}")
+    if kp.ndim != 3 or kp.shape[1:] != (21, 3) or kp.shape[0] == 0:
+        raise RetargetError(f"keypoints must have shape (T >= 1, 21, 3), got {kp.shape}")
     if not np.all(np.isfinite(kp)):
         bad = int(np.argwhere(~np.isfinite(kp))[0, 0])
         raise RetargetError(f"keypoints contain NaN or inf (first at frame {bad}); fill gaps first")
-    if not (np.isfinite(fps) and fps > 0):
-        raise RetargetError(f"fps must be positive, got {fps}")
+    fps = check_fps(fps, "fps")
     if order != "mano21":
         kp = convert_keypoints(kp, order, "mano21")
     rest = HandSkeleton.default(side).rest_keypoints
@@ -128,8 +129,9 @@ def load_keypoints(path, units: str = "m") -> np.ndarray:
                 a = a[1:]
         else:
             raise RetargetError(f"unsupported keypoint file {path.name}: use .npy, .npz or .csv")
-    except (OSError, ValueError) as e:
-        raise RetargetError(f"cannot read keypoints from {path}: {e}") from e
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        reason = "the file is empty" if path.stat().st_size == 0 else str(e) or type(e).__name__
+        raise RetargetError(f"cannot read keypoints from {path}: {reason}") from e
     a = np.asarray(a, dtype=np.float64)
     if a.ndim == 2 and a.shape[1] == 63:
         a = a.reshape(-1, 21, 3)
@@ -147,8 +149,13 @@ def load_keypoints(path, units: str = "m") -> np.ndarray:
 
 
 def run_keypoints(cfg) -> dict:
-    """``retarget keypoints``: retarget a keypoint file; write the trajectory and metrics."""
+    """``retarget keypoints``: retarget a keypoint file; write the trajectory and metrics.
+
+    The keypoints pass the plausibility checks first (``dexcanvas_core.plausibility``: hand
+    scale against ``cfg.units``, outliers, wrist speed), so a unit mistake is named as such
+    instead of failing in the solver."""
     kp = load_keypoints(cfg.input, cfg.units)
+    check_keypoint_sequence(kp, check_fps(cfg.fps), str(cfg.input), units=cfg.units)
     hand = get_hand(cfg.hand)
     robot = retarget_keypoints(hand, kp, cfg.fps, cfg.order)
     out = cfg.out

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from dexcanvas_core.errors import ValidationError
+from dexcanvas_core.plausibility import check_trajectory
 from dexcanvas_core.rotations import slerp_aa
 from dexcanvas_core.table import Table
 from dexcanvas_core.trajectory.arrays import check_aa, check_finite, f32
@@ -124,7 +125,9 @@ class Trajectory:
 
     # -- checks ------------------------------------------------------------------------------
     def validate(self, *, fps_tolerance: float = 0.05) -> Trajectory:
-        """Check shapes, finiteness, rotations, timestamps and fps; raise on the first problem.
+        """Check shapes, finiteness, rotations, timestamps and fps, then plausibility (hand
+        scale, human motion limits, outlier frames: :mod:`dexcanvas_core.plausibility`, which
+        only warns under ``allowing_implausible``); raise on the first problem.
 
         Rotations: axis-angle norms must be below 2π (larger norms usually mean degrees were
         stored); per-joint finger rotations below π. Timestamps must be strictly increasing, and
@@ -223,6 +226,7 @@ class Trajectory:
                 check_finite(v, f"{where}: contact.{k}", k)
         if self.object_wrench_world is not None:
             check_finite(self.object_wrench_world, f"{where}: object_wrench_world", "wrench")
+        check_trajectory(self)
         return self
 
     # -- time operations ---------------------------------------------------------------------
