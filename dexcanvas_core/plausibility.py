@@ -34,7 +34,6 @@ every finding is then logged as a warning instead of raised.
 from __future__ import annotations
 
 import argparse
-import contextvars
 import logging
 import math
 from collections.abc import Iterator
@@ -75,7 +74,8 @@ LIMITS = Limits()
 ALLOW_FLAG = "--allow-implausible"
 _MIDDLE_CHAIN = [MANO21.index(k) for k in ("wrist", "middle1", "middle2", "middle3", "middle_tip")]
 _UNIT_GUESSES = (("millimetres", 1e-3, "mm"), ("centimetres", 1e-2, "cm"))
-_allow: contextvars.ContextVar[bool] = contextvars.ContextVar("allow_implausible", default=False)
+_warned: set[str] = set()
+_allow = [False]  # process-wide, not a ContextVar: datasets are written from Lance's threads
 
 
 class ImplausibleDataError(ValidationError):
@@ -88,6 +88,7 @@ class ImplausibleDataError(ValidationError):
     def __init__(self, message: str, *, field: str, fix: str, frame: int | None = None):
         self.frame = frame
         self.fix = fix
+        self.finding = f"{message}; {fix}"
         super().__init__(
             f"{message}; {fix} (or pass {ALLOW_FLAG} if the data is real)", field=field
         )
@@ -96,17 +97,19 @@ class ImplausibleDataError(ValidationError):
 @contextmanager
 def allowing_implausible(allow: bool = True) -> Iterator[None]:
     """Within the block, plausibility findings are logged as warnings instead of raised
-    (``allow=False``: raised, the default)."""
-    token = _allow.set(bool(allow))
+    (``allow=False``: raised, the default). The setting is process-wide (it holds in the
+    threads that write datasets, and in worker processes forked inside the block)."""
+    before = _allow[0]
+    _allow[0] = bool(allow)
     try:
         yield
     finally:
-        _allow.reset(token)
+        _allow[0] = before
 
 
 def implausible_allowed() -> bool:
     """Whether findings are currently only warned about (:func:`allowing_implausible`)."""
-    return _allow.get()
+    return _allow[0]
 
 
 def add_allow_implausible(parser: argparse.ArgumentParser) -> None:
@@ -121,8 +124,10 @@ def add_allow_implausible(parser: argparse.ArgumentParser) -> None:
 
 def report(error: ImplausibleDataError) -> None:
     """Raise ``error``, or log it as a warning under :func:`allowing_implausible`."""
-    if _allow.get():
-        log.warning("implausible data accepted (%s): %s", ALLOW_FLAG, error)
+    if _allow[0]:
+        if error.finding not in _warned:  # data read twice is reported once
+            _warned.add(error.finding)
+            log.warning("implausible data accepted (%s): %s", ALLOW_FLAG, error.finding)
         return
     raise error
 
