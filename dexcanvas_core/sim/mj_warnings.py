@@ -28,21 +28,24 @@ _NAMES = tuple(
 class WarningCounter:
     """Counts one ``MjData``'s MuJoCo warnings per frame of a simulation.
 
-    Call :meth:`update` after each frame's physics steps with the frame index. A counter that
-    went down means the data was reset (``mj_resetData``, or MuJoCo's own reset after a blow-up,
-    which keeps only the blow-up's count): the new value counts from zero.
+    Call :meth:`update` after each frame's physics steps with the frame index. Simulation time
+    or a counter going down means the data was reset (``mj_resetData``, or MuJoCo's own reset
+    after a blow-up, which leaves only the blow-up's count, 1): the counters then count anew.
     """
 
     def __init__(self) -> None:
         self._seen = np.zeros(len(_NAMES), dtype=np.int64)
+        self._time = -np.inf
         self.counts: dict[str, int] = {}
         self.first_frame: dict[str, int] = {}
 
     def update(self, d: mujoco.MjData, frame: int) -> None:
         """Add the warnings ``d`` counted since the previous call, as of ``frame``."""
+        reset = d.time < self._time  # the data was reset since: its counters restarted
+        self._time = float(d.time)
         for i, name in enumerate(_NAMES):
             n = int(d.warning[i].number)
-            new = n - self._seen[i] if n >= self._seen[i] else n
+            new = n if reset or n < self._seen[i] else n - self._seen[i]
             self._seen[i] = n
             if new > 0:
                 self.counts[name] = self.counts.get(name, 0) + int(new)
@@ -54,6 +57,7 @@ class WarningCounter:
         out = WarningCounter()
         out.counts, out.first_frame = dict(self.counts), dict(self.first_frame)
         out._seen = np.array([int(d.warning[i].number) for i in range(len(_NAMES))])
+        out._time = float(d.time)
         return out
 
     def to_dict(self) -> dict[str, dict[str, int]]:
