@@ -69,7 +69,7 @@ def test_millimetres_are_named_with_the_fix(demo):
 
 
 def test_one_outlier_frame_is_named(demo):
-    with pytest.raises(ImplausibleDataError, match="at frame 17 is .* from both neighbouring") as e:
+    with pytest.raises(ImplausibleDataError, match=r"frame 17 is .* from both neighbouring") as e:
         with_wrist(demo, 17, (1e6, 0.0, 0.0)).validate()
     assert e.value.frame == 17 and "drop or interpolate frame 17" in str(e.value)
 
@@ -93,9 +93,8 @@ def test_too_fast_and_too_accelerated_are_named(demo):
 
 
 def test_far_beyond_a_room(demo):
-    far = dataclasses.replace(
-        demo, objects=[ObjectTrack("cube2", demo.object.pos + [20.0, 0, 0], demo.object.rot_aa)]
-    )
+    pos = demo.object.pos + np.array([20.0, 0.0, 0.0])
+    far = dataclasses.replace(demo, objects=[ObjectTrack("cube2", pos, demo.object.rot_aa)])
     with pytest.raises(ImplausibleDataError, match=r"objects\[cube2\]\.pos at frame 0 is"):
         far.validate()
 
@@ -124,7 +123,7 @@ def test_fps_that_is_no_rate_is_refused(fps):
 
 @pytest.mark.parametrize("fps", [1e-6, 0.5, 2e4])
 def test_absurd_fps_is_implausible(fps):
-    with pytest.raises(ImplausibleDataError, match="outside 1..10000 Hz"):
+    with pytest.raises(ImplausibleDataError, match=r"outside 1\.\.10000 Hz"):
         check_fps(fps)
     with allowing_implausible():
         assert check_fps(fps) == fps
@@ -146,9 +145,9 @@ def test_empty_keypoint_files(tmp_path):
     (tmp_path / "empty.npz").write_bytes(b"")
     np.save(tmp_path / "none.npy", np.zeros((0, 21, 3)))
     np.savez(tmp_path / "nokey.npz")
-    with pytest.raises(RetargetError, match="empty.npy: the file is empty"):
+    with pytest.raises(RetargetError, match=r"empty\.npy: the file is empty"):
         load_keypoints(tmp_path / "empty.npy")
-    with pytest.raises(RetargetError, match="empty.npz: the file is empty"):
+    with pytest.raises(RetargetError, match=r"empty\.npz: the file is empty"):
         load_keypoints(tmp_path / "empty.npz")
     with pytest.raises(RetargetError, match=r"T >= 2.*got \(0, 21, 3\)"):
         load_keypoints(tmp_path / "none.npy")
