@@ -69,7 +69,7 @@ def keypoints_to_trajectory(
     """
     kp = np.asarray(keypoints, dtype=np.float64)
     if kp.ndim != 3 or kp.shape[1:] != (21, 3) or kp.shape[0] == 0:
-        raise RetargetError(f"keypoints must have shape (T >= 1, 21, 3), got {kp.shape}")
+        raise RetargetError(f"keypoints must have shape (T, 21, 3) with T >= 1, got {kp.shape}")
     if not np.all(np.isfinite(kp)):
         bad = int(np.argwhere(~np.isfinite(kp))[0, 0])
         raise RetargetError(f"keypoints contain NaN or inf (first at frame {bad}); fill gaps first")
