@@ -22,6 +22,8 @@ from dexcanvas_core.plausibility import (
     hand_length,
 )
 from dexcanvas_core.sim.mj_warnings import WarningCounter, blew_up, describe
+from dexcanvas_core.sim.pipeline import SimConfig, simulate
+from dexcanvas_core.sim.tracker import TrackingEnv
 from dexcanvas_core.trajectory import ObjectTrack
 from retarget import Retargeter, get_hand
 from retarget.cli import main as retarget_main
@@ -246,3 +248,21 @@ def test_dataset_in_millimetres_exit_codes(demo, tmp_path, capsys):
     assert retarget_main([*args, "--out", str(tmp_path / "a")]) == 2
     assert "looks like millimetres" in capsys.readouterr().err
     assert retarget_main([*args, "--out", str(tmp_path / "b"), "--allow-implausible"]) == 3
+
+
+def test_blown_up_force_pipeline_is_recorded_and_a_failure(monkeypatch):
+    human = load_demonstration("cube2/tripod").slice(0, 30)
+    cfg = SimConfig(tracker="open_loop")
+    assert simulate(human, cfg).metrics["mujoco_warnings"] == {}
+    step = TrackingEnv.step
+
+    def step_with_blow_up(self, a):
+        r = step(self, a)
+        if self.t == 10:  # counted at the next frame's end
+            self.scene.data.warning[int(mujoco.mjtWarning.mjWARN_BADQACC)].number += 1
+        return r
+
+    monkeypatch.setattr(TrackingEnv, "step", step_with_blow_up)
+    res = simulate(human, cfg)
+    assert res.metrics["mujoco_warnings"] == {"BADQACC": {"count": 1, "first_frame": 11}}
+    assert not res.success and res.metrics["failed_at_frame"] is None
