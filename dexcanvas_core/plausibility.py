@@ -180,7 +180,7 @@ def check_hand_scale(
     lo, hi = LIMITS.hand_length_m
     if lo <= length <= hi:
         return
-    measured = f"{where}: {field} gives a hand {length:.4g} m long (wrist to middle fingertip)"
+    measured = f"{where}: {field}: the hand is {length:.4g} m long (wrist to middle fingertip)"
     if length < 1e-6:
         report(
             ImplausibleDataError(
