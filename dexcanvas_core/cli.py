@@ -22,6 +22,7 @@ from dexcanvas_core.io import export_parquet, open_dataset
 from dexcanvas_core.io.decode import row_to_trajectory
 from dexcanvas_core.loaders.selection import select_rows
 from dexcanvas_core.objects.options import add_object_options, use_object_options
+from dexcanvas_core.plausibility import add_allow_implausible, allowing_implausible, check_fps
 from dexcanvas_core.safe_io import check_output
 
 
@@ -122,12 +123,15 @@ def run_export(cfg: ExportConfig) -> Path:
             f"{Path(cfg.out) / 'export.parquet'}"
         )
     check_output(cfg.out, overwrite=cfg.overwrite, kind="file", what="--parquet")
+    ds = open_dataset(cfg.path)
     sel = select_rows(
-        open_dataset(cfg.path),
+        ds,
         manipulation_types=list(cfg.manipulation_types) or None,
         objects=list(cfg.objects) or None,
         operators=list(cfg.operators) or None,
     )
+    for _ in ds.iter_trajectories(filter=sel.filter):  # full validation, plausibility included
+        pass
     out = export_parquet(cfg.path, cfg.out, filter=sel.filter, overwrite=cfg.overwrite)
     print(f"wrote {out}")
     return out
@@ -172,6 +176,8 @@ def run_fit_command(args: argparse.Namespace) -> dict:
         run_fit,
     )
 
+    if args.fps is not None:
+        check_fps(args.fps)
     cfg = FitConfig(
         markers=args.markers,
         out=args.out,
@@ -285,6 +291,7 @@ def build_parser() -> argparse.ArgumentParser:
         "validate", help="check every row of a dataset (shapes, NaNs, rotations, fps)"
     )
     s.add_argument("path", type=Path)
+    add_allow_implausible(s)
 
     s = sub.add_parser("export", help="export a dataset (optionally filtered) to Parquet")
     s.add_argument("path", type=Path)
@@ -293,6 +300,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--types", nargs="*", default=[], help="manipulation types (names or codes)")
     s.add_argument("--operators", nargs="*", default=[])
     s.add_argument("--overwrite", action="store_true", help="replace an existing --parquet file")
+    add_allow_implausible(s)
 
     s = sub.add_parser("demos", help="generated human demonstrations")
     demos_sub = s.add_subparsers(dest="demos_command", required=True, metavar="SUBCOMMAND")
@@ -320,6 +328,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--calibration", type=Path, default=None, help="saved subject calibration")
     s.add_argument("--save-calibration", type=Path, default=None)
     s.add_argument("--overwrite", action="store_true")
+    add_allow_implausible(s)
 
     s = sub.add_parser(
         "simulate",
@@ -335,6 +344,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--object", default=None, help="simulate another catalogue object (cube2h for a cube2 demo)"
     )
     s.add_argument("--no-plot", action="store_true", help="skip the per-finger force PNG")
+    add_allow_implausible(s)
     add_object_options(s)
     _add_tracker_args(s)
 
@@ -346,6 +356,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
     s.add_argument("--workers", type=int, default=1, help="processes")
     s.add_argument("--limit", type=int, default=None, help="only the first N source rows")
+    add_allow_implausible(s)
     from dexcanvas_core.sim.synthesis import PerturbationRanges  # lazy: mujoco ~0.5 s on --help
 
     d = PerturbationRanges()
@@ -365,6 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_tracker_args(s)
 
     add_import_parser(sub)
+    add_allow_implausible(sub.choices["import"])
 
     s = sub.add_parser("example", help="write the built-in synthetic example dataset")
     s.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
@@ -412,7 +424,11 @@ def main(argv: list[str] | None = None) -> int:
             run_example(ExampleConfig(args.out, args.seed, args.overwrite))
         return EXIT_OK
 
-    return run_command("dexcanvas", args.command, run)
+    def run_checked() -> int:
+        with allowing_implausible(getattr(args, "allow_implausible", False)):
+            return run()
+
+    return run_command("dexcanvas", args.command, run_checked)
 
 
 if __name__ == "__main__":

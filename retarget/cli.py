@@ -22,6 +22,7 @@ from pathlib import Path
 from dexcanvas_core.errors import DexCanvasError
 from dexcanvas_core.exits import EXIT_FAILED, EXIT_OK, run_command
 from dexcanvas_core.objects.options import add_object_options, use_object_options
+from dexcanvas_core.plausibility import add_allow_implausible, allowing_implausible, check_fps
 from retarget import __version__
 from retarget.cli_commands import (
     HandsConfig,
@@ -169,6 +170,7 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
         default="auto",
         help="renderer of the --snapshot stills (default: Chromium if installed, else MuJoCo)",
     )
+    add_allow_implausible(p)
 
 
 def _run_config(args: argparse.Namespace):
@@ -246,6 +248,7 @@ def _add_snapshot_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-html", action="store_true", help="do not write scene.html")
     p.add_argument("--backend", choices=["pinocchio", "mink"], default="pinocchio")
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
+    add_allow_implausible(p)
 
 
 def _snapshot_config(args: argparse.Namespace):
@@ -321,11 +324,11 @@ def _add_keypoints_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--overwrite", action="store_true", help="replace the trajectory already in --out"
     )
+    add_allow_implausible(p)
 
 
 def _keypoints_config(args: argparse.Namespace):
-    if not args.fps > 0:
-        raise SystemExit("retarget keypoints: error: --fps must be positive")
+    check_fps(args.fps)
     # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.keypoint_input import KeypointsConfig
 
@@ -444,7 +447,8 @@ def main(argv: list[str] | None = None) -> int:
 
     def run() -> int:
         use_object_options(args)
-        return cmd.exit_code(cmd.run(cmd.make_config(args)))
+        with allowing_implausible(getattr(args, "allow_implausible", False)):
+            return cmd.exit_code(cmd.run(cmd.make_config(args)))
 
     return run_command("retarget", args.command, run, (RetargetError, DexCanvasError))
 

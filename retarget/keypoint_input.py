@@ -18,6 +18,7 @@ import numpy as np
 
 from dexcanvas_core.keypoints import MANO21, convert_keypoints
 from dexcanvas_core.mano import HandSkeleton
+from dexcanvas_core.plausibility import check_fps, check_keypoint_sequence
 from dexcanvas_core.rotations import matrix_to_aa
 from dexcanvas_core.safe_io import atomic_write_text
 from dexcanvas_core.trajectory import HandTrack, Trajectory
@@ -70,13 +71,12 @@ def keypoints_to_trajectory(
         order: ``"mano21"`` or ``"openpose21"``.
     """
     kp = np.asarray(keypoints, dtype=np.float64)
-    if kp.ndim != 3 or kp.shape[1:] != (21, 3):
-        raise RetargetError(f"keypoints must have shape (T, 21, 3), got {kp.shape}")
+    if kp.ndim != 3 or kp.shape[1:] != (21, 3) or kp.shape[0] == 0:
+        raise RetargetError(f"keypoints must have shape (T, 21, 3) with T >= 1, got {kp.shape}")
     if not np.all(np.isfinite(kp)):
         bad = int(np.argwhere(~np.isfinite(kp))[0, 0])
         raise RetargetError(f"keypoints contain NaN or inf (first at frame {bad}); fill gaps first")
-    if not (np.isfinite(fps) and fps > 0):
-        raise RetargetError(f"fps must be positive, got {fps}")
+    fps = check_fps(fps, "fps")
     if order != "mano21":
         kp = convert_keypoints(kp, order, "mano21")
     rest = HandSkeleton.default(side).rest_keypoints
@@ -132,8 +132,9 @@ def load_keypoints(path, units: str = "m") -> np.ndarray:
                 a = a[1:]
         else:
             raise RetargetError(f"unsupported keypoint file {path.name}: use .npy, .npz or .csv")
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:  # empty, truncated
-        raise RetargetError(f"cannot read keypoints from {path}: {e}") from e
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        reason = "the file is empty" if path.stat().st_size == 0 else str(e) or type(e).__name__
+        raise RetargetError(f"cannot read keypoints from {path}: {reason}") from e
     a = np.asarray(a, dtype=np.float64)
     if a.ndim == 2 and a.shape[1] == 63:
         a = a.reshape(-1, 21, 3)
@@ -152,13 +153,18 @@ def load_keypoints(path, units: str = "m") -> np.ndarray:
 
 def run_keypoints(cfg) -> dict:
     """``retarget keypoints``: retarget a keypoint file; write the trajectory and metrics
-    (``out`` checked, created and locked first: :func:`retarget.outputs.open_run_dir`)."""
+    (``out`` checked, created and locked first: :func:`retarget.outputs.open_run_dir`).
+
+    The keypoints pass the plausibility checks first (``dexcanvas_core.plausibility``: hand
+    scale against ``cfg.units``, outliers, wrist speed), so a unit mistake is named as such
+    instead of failing in the solver."""
     with open_run_dir(cfg.out, overwrite=cfg.overwrite) as out:
         return _run_keypoints(cfg, out)
 
 
 def _run_keypoints(cfg, out: Path) -> dict:
     kp = load_keypoints(cfg.input, cfg.units)
+    check_keypoint_sequence(kp, check_fps(cfg.fps), str(cfg.input), units=cfg.units)
     hand = get_hand(cfg.hand)
     robot = retarget_keypoints(hand, kp, cfg.fps, cfg.order)
     robot.save_npz(out / "robot_trajectory.npz")

@@ -17,6 +17,7 @@ moved from the retargeted ones (joint deviation), so users see what physics cost
 
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass, field, fields, replace
 from types import SimpleNamespace
@@ -24,6 +25,7 @@ from types import SimpleNamespace
 import mujoco
 import numpy as np
 
+from dexcanvas_core.sim.mj_warnings import WarningCounter
 from dexcanvas_core.sim.mpc import MPCConfig, OpenLoop, SamplingMPC, track
 from dexcanvas_core.sim.tracker import TrackingConfig, TrackingEnv
 from retarget.errors import RetargetError
@@ -97,11 +99,16 @@ class RefineResult:
     on the object in the refined simulation, world frame, averaged over the frame's physics
     steps (the re-simulation's ``ValidationResult.finger_force_world`` layout)."""
     fingers: list[str] = field(default_factory=list)
+    mujoco_warnings: dict = field(default_factory=dict)
+    """MuJoCo's warnings in the refined simulation (the attempt kept, and for a calibrated
+    refinement the chosen iterate's), ``{type: {"count", "first_frame"}}``; a blow-up makes
+    ``success`` False (``dexcanvas_core.sim.mj_warnings``)."""
 
     def metrics(self) -> dict:
         return {
             "success": self.success,
             "failed_at_frame": self.failed_at_frame,
+            "mujoco_warnings": dict(self.mujoco_warnings),
             "frames_tracked": int(self.object_pos_err.shape[0]),
             "object_pos_err_max_m": float(self.object_pos_err.max()),
             "object_pos_err_mean_m": float(self.object_pos_err.mean()),
@@ -166,8 +173,12 @@ def refine(hand, geometry, human, robot, tip_sites: list[str], cfg: RefineConfig
     pos_err = np.asarray(log.pos_err)
     robot_fingers = list(hand.robot_fingers)
     return RefineResult(
-        success=env.failed_at is None and Tt == T and bool((pos_err <= 0.05).all()),
+        success=env.failed_at is None
+        and Tt == T
+        and bool((pos_err <= 0.05).all())
+        and not env.warnings.blew_up,
         failed_at_frame=env.failed_at,
+        mujoco_warnings=env.warnings.to_dict(),
         object_pos_err=pos_err,
         object_rot_err=np.asarray(log.rot_err),
         ctrl=ctrl,
@@ -207,8 +218,12 @@ def calibrate_refined(
         log = track(env, OpenLoop())
         pe = np.asarray(log.pos_err)
         return SimpleNamespace(
-            success=env.failed_at is None and pe.shape[0] == T and bool((pe <= 0.05).all()),
+            success=env.failed_at is None
+            and pe.shape[0] == T
+            and bool((pe <= 0.05).all())
+            and not env.warnings.blew_up,
             first_failure_frame=env.failed_at,
+            mujoco_warnings=env.warnings.to_dict(),
             object_pos_err=pe,
             object_rot_err=np.asarray(log.rot_err),
             finger_force_world=finger_forces(hand, m, fingers, log.contacts),
@@ -224,7 +239,7 @@ def calibrate_refined(
     rollout = SimpleNamespace(  # iterate 0: the refinement's own rollout
         success=refined.success, first_failure_frame=refined.failed_at_frame,
         object_pos_err=refined.object_pos_err, object_rot_err=refined.object_rot_err,
-        finger_force_world=refined.finger_force_world,
+        finger_force_world=refined.finger_force_world, mujoco_warnings=refined.mujoco_warnings,
     )  # fmt: skip
     finger_acts = act_q >= 6
     n = ccfg.iterations
@@ -240,6 +255,7 @@ def calibrate_refined(
         object_rot_err=np.asarray(s.object_rot_err),
         ctrl=np.asarray(cal.commands),
         finger_force_world=s.finger_force_world,
+        mujoco_warnings=s.mujoco_warnings,
         compute_s=refined.compute_s + cal.compute_s,
         calibration=cal.metrics(),
     )
@@ -257,6 +273,7 @@ class _Checkpoint:
     log_len: int
     plan: np.ndarray
     plan_t: int
+    warnings: WarningCounter
 
 
 def _checkpoint(env: TrackingEnv, mpc: SamplingMPC) -> _Checkpoint:
@@ -264,6 +281,7 @@ def _checkpoint(env: TrackingEnv, mpc: SamplingMPC) -> _Checkpoint:
     return _Checkpoint(
         t=env.t, state=env.state(), warmstart=d.qacc_warmstart.copy(), ctrl=d.ctrl.copy(),
         u=env.u.copy(), log_len=len(env.log.pos_err), plan=mpc.plan.copy(), plan_t=mpc.plan_t,
+        warnings=copy.deepcopy(env.warnings),
     )  # fmt: skip
 
 
@@ -276,6 +294,7 @@ def _restore(env: TrackingEnv, mpc: SamplingMPC, c: _Checkpoint) -> None:
     mujoco.mj_forward(m, d)
     d.qacc_warmstart[:] = c.warmstart  # mj_forward's solve overwrote it
     env.t, env.u, env.failed_at = c.t, c.u.copy(), None
+    env.warnings = c.warnings.resumed(d)  # the abandoned attempt's warnings are dropped
     for f in fields(env.log):
         del getattr(env.log, f.name)[c.log_len :]
     mpc.plan, mpc.plan_t = c.plan.copy(), c.plan_t

@@ -8,6 +8,7 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+from dexcanvas_core.sim.mj_warnings import blew_up, describe
 from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S
 from retarget.force_scores import REACH_M
 from retarget.metrics import CONTACT_OFF_TARGET_M
@@ -34,6 +35,13 @@ def _object_cell(rec: dict | None) -> str:
     return text
 
 
+def _warnings_cell(warnings: dict) -> str:
+    """MuJoCo's warnings of a simulation, red when the solver blew up (the run failed)."""
+    if blew_up(warnings):
+        return f"[red]{describe(warnings)}: the solver blew up, the run failed[/red]"
+    return f"[yellow]{describe(warnings)}[/yellow]"
+
+
 def print_summary(m: dict, out_dir: Path) -> None:
     """Print the run's ``metrics.json`` ``m`` as a table, with where it was written."""
     ok = "[green]SUCCESS[/green]" if m["success"] else "[red]FAILED[/red]"
@@ -52,6 +60,8 @@ def print_summary(m: dict, out_dir: Path) -> None:
     t.add_row("object rotation error mean", f"{np.degrees(m['object_rot_err_mean_rad']):.1f}°")
     t.add_row("object", _object_cell(m.get("object")))
     t.add_row("loose rule (mean < 10 cm, < 0.5 rad)", "yes" if m["success_loose"] else "no")
+    if m.get("mujoco_warnings"):
+        t.add_row("MuJoCo warnings", _warnings_cell(m["mujoco_warnings"]))
     t.add_row("keypoint error mean", f"{1000 * m['keypoint_err_mean_m']:.1f} mm")
     if m["contact_err_mean_m"] is not None:
         t.add_row(
@@ -128,6 +138,11 @@ def print_summary(m: dict, out_dir: Path) -> None:
             f"{np.degrees(r['finger_ctrl_deviation_mean_rad']):.1f}° (fingers), "
             f"{1000 * r['wrist_pos_deviation_mean_m']:.1f} mm (wrist); "
             f"{r['attempts']} attempt{'s' if r['attempts'] > 1 else ''}, {r['compute_s']:.1f} s"
+            + (
+                f"; MuJoCo warnings: {_warnings_cell(r['mujoco_warnings'])}"
+                if r.get("mujoco_warnings")
+                else ""
+            )
             + (
                 f"; force calibration: iterate {c['chosen_iterate']}, force error "
                 f"{_num(c['force_error_before'])} → {_num(c['force_error_after'])}"

@@ -31,6 +31,7 @@ from scipy.spatial.transform import Rotation
 from dexcanvas_core.rotations import aa_to_quat_wxyz, quat_wxyz_to_aa, rotation_angle_between_aa
 from dexcanvas_core.sim import mujoco_log  # noqa: F401 (MuJoCo's warnings to logging, not a file)
 from dexcanvas_core.sim.forces import object_contacts
+from dexcanvas_core.sim.mj_warnings import WarningCounter
 from dexcanvas_core.sim.scene import OBJECT_ANCHOR, OBJECT_HOLD, add_object_hold
 from dexcanvas_core.sim.support import hold_until_frame
 from dexcanvas_core.table import DEFAULT_TABLE, Table
@@ -246,6 +247,8 @@ class Resimulator:
             wrist.reset_peaks()  # frame 0 (no steps of its own) gets the settling's last
             wrist.step(d, *hold)
         wrist.reset_counts()
+        warnings = WarningCounter()
+        warnings.update(d, 0)  # the settling counts as frame 0
         F = len(self.fingers) + 1
         forces = np.zeros((T, F, 3))
         pos_sim = np.zeros((T, 3))
@@ -281,6 +284,7 @@ class Resimulator:
             q_sim[t] = d.qpos[: self.hand_nq]
             rot_sim[t] = quat_wxyz_to_aa(d.qpos[self.obj_qadr + 3 : self.obj_qadr + 7])
             force_peak[t], torque_peak[t] = wrist.force_peak, wrist.torque_peak
+            warnings.update(d, t)
             if progress is not None:
                 progress(t + 1, T)
             if not np.all(np.isfinite(d.qpos)):
@@ -296,7 +300,7 @@ class Resimulator:
         rot_err = rotation_angle_between_aa(rot_sim, r_obj)
         over = np.flatnonzero(pos_err > self.cfg.success_threshold_m)
         return ValidationResult(
-            success=over.size == 0,
+            success=over.size == 0 and not warnings.blew_up,
             success_loose=bool(
                 pos_err.mean() < self.cfg.loose_pos_m and rot_err.mean() < self.cfg.loose_rot_rad
             ),
@@ -320,6 +324,7 @@ class Resimulator:
             wrist_force_peak=force_peak,
             wrist_torque_peak=torque_peak,
             object_held_until_frame=held_until if held_until < T else T,
+            mujoco_warnings=warnings.to_dict(),
             meta={
                 "integrator": "implicitfast",
                 "cone": "elliptic",

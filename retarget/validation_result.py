@@ -50,6 +50,10 @@ class ValidationResult:
     the last settling step's."""
     wrist_torque_peak: np.ndarray | None = None
     """(T,) [N·m] the same for the largest of the three hinge torques."""
+    mujoco_warnings: dict = field(default_factory=dict)
+    """MuJoCo's warnings in the re-simulation, ``{type: {"count", "first_frame"}}``
+    (``dexcanvas_core.sim.mj_warnings``; empty: none). A blow-up (``BADQACC``, ``BADQVEL``,
+    ``BADQPOS``) makes ``success`` False."""
 
     @property
     def object_pos_err_max_m(self) -> float:
@@ -99,6 +103,7 @@ class ValidationResult:
             "penetration_max_m": float(self.penetration_max_m),
             "first_failure_frame": self.first_failure_frame,
             "object_held_until_frame": int(self.object_held_until_frame),
+            "mujoco_warnings": dict(self.mujoco_warnings),
             "finger_force_mean_n": {
                 f: float(np.linalg.norm(self.finger_force_world[:, i], axis=1).mean())
                 for i, f in enumerate([*self.fingers, "palm"])

@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pyarrow as pa
 
+from dexcanvas_core.mano import HandSkeleton
+
 
 def f3():
     return pa.list_(pa.float32(), 3)
@@ -91,6 +93,13 @@ def public_row(
     """One row as Python values in the public layout (random but valid numbers)."""
     f = lambda *shape: rng.normal(size=shape).astype(np.float32)  # noqa: E731
     small = lambda *shape: (0.3 * rng.uniform(-1, 1, size=shape)).astype(np.float32)  # noqa: E731
+
+    def walk(T: int, start) -> np.ndarray:
+        """A random walk of 2 mm steps from ``start`` [m] (human speeds: the plausibility
+        checks refuse a hand or object jumping by metres between frames)."""
+        return (np.asarray(start) + 2e-3 * np.cumsum(f(T, 3), axis=0)).astype(np.float32)
+
+    rest = HandSkeleton.default("right").rest_keypoints  # a hand-sized skeleton
     contact = []
     for _t in range(T):
         frame = []
@@ -134,14 +143,14 @@ def public_row(
         "timestamp": (np.arange(T) / fps + 12.5).tolist(),
         "hands": [{
             "hand_name": "right",
-            "mano_global_pos": f(T, 3).tolist(),
+            "mano_global_pos": (wrist := walk(T, (0.3, 0.0, 0.2))).tolist(),
             "mano_global_rot_aa": small(T, 3).tolist(),
             "mano_hand_pose": small(T, 48).tolist(),
-            "mano_joint_pos": f(T, 21, 3).tolist(),
+            "mano_joint_pos": (rest + wrist[:, None] + 1e-3 * f(T, 21, 3)).tolist(),
             "urdf_dof": f(T, dof).tolist(),
             "urdf_dof_target": f(T, dof).tolist(),
         }],
-        "objects": [{"rot_aa": small(T, 3).tolist(), "pos": f(T, 3).tolist()}],
+        "objects": [{"rot_aa": small(T, 3).tolist(), "pos": walk(T, (0.2, 0.0, 0.03)).tolist()}],
         "contact": contact,
     }  # fmt: skip
     if extra_column:

@@ -239,8 +239,10 @@ def test_table_is_cut_where_the_hand_goes_below_it():
     a = capture_arrays()
     a["wrist_pos"] = a["wrist_pos"].copy()
     a["keypoints"] = a["keypoints"].copy()
-    a["wrist_pos"][-5:] += np.array([0.3, 0.0, -0.25])  # off the edge and 15 cm down
-    a["keypoints"][-5:] += np.array([0.3, 0.0, -0.25])
+    # off the edge and 15 cm down over the last 25 frames (at a human speed), held for 5
+    off = np.clip(np.linspace(0.0, 1.25, 25), 0.0, 1.0)[:, None] * np.array([0.3, 0.0, -0.25])
+    a["wrist_pos"][-25:] += off
+    a["keypoints"][-25:] += off[:, None]
     traj, _ = capture_to_trajectory(capture_from_arrays(a, name="edge"))
     tab = traj.table
     kp = traj.hand.joint_pos

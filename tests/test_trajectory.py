@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 
 from dexcanvas_core.errors import ValidationError
+from dexcanvas_core.mano import HandSkeleton
 from dexcanvas_core.rotations import aa_to_matrix, rotation_angle_between_aa
 from dexcanvas_core.trajectory import (
     CONTACT_PAIR_FIELDS,
@@ -22,12 +23,15 @@ def make_traj(T=121, fps=120.0, seed=0, contacts=True) -> Trajectory:
     rot = axis * (0.2 + 0.5 * t)[:, None]
     pose = np.zeros((T, 48))
     pose[:, 3:] = 0.3 * np.sin(t[:, None] + np.arange(45))
+    wrist = np.stack([0.1 * t, 0.0 * t, 0.2 + 0.05 * t], 1)
+    # A hand-sized skeleton (the plausibility checks refuse other scales), 1 mm of noise.
+    keypoints = HandSkeleton.default("right").rest_keypoints + wrist[:, None]
     hand = HandTrack(
         name="right",
-        global_pos=np.stack([0.1 * t, 0.0 * t, 0.2 + 0.05 * t], 1),
+        global_pos=wrist,
         global_rot_aa=rot,
         hand_pose=pose,
-        joint_pos=rng.normal(size=(T, 21, 3)),
+        joint_pos=keypoints + 1e-3 * rng.normal(size=(T, 21, 3)),
         urdf_dof=rng.normal(size=(T, 26)),
     )
     obj = ObjectTrack("cube2", np.stack([0.2 * t, t * 0, t * 0 + 0.03], 1), -rot)

@@ -56,12 +56,14 @@ from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.io import write_dataset
 from dexcanvas_core.mano.skeleton import BETA0_SCALE_PER_UNIT
 from dexcanvas_core.mocap.calibrate import SubjectCalibration
+from dexcanvas_core.mocap.frames import UNITS_M
 from dexcanvas_core.mocap.layout import HAND_MARKER_NAMES, OBJECT_MARKER_NAMES
 from dexcanvas_core.mocap.options import FitOptions
 from dexcanvas_core.mocap.readers import read_markers
 from dexcanvas_core.mocap.results import FIT_INFO_COLUMN, FIT_QUALITY_COLUMN, FitFlags, MocapFit
 from dexcanvas_core.mocap.stages import MarkerDataError, fit_hand, fit_object
 from dexcanvas_core.mocap.stream import MarkerStream
+from dexcanvas_core.plausibility import check_hand_scale
 from dexcanvas_core.rotations import rotation_angle_between_aa
 from dexcanvas_core.safe_io import check_output
 from dexcanvas_core.taxonomy import object_spec
@@ -218,6 +220,8 @@ def fit_markers(
             FIT_INFO_COLUMN: pa.scalar(json.dumps(info, default=_json_default)),
         },
     )
+    unit = next((k for k, v in UNITS_M.items() if math.isclose(v, stream.frame.unit_m)), None)
+    check_hand_scale(track.joint_pos, f"{stream.source}", "the fitted hand", units=unit)
     traj.validate()
     log.info(
         "fitted %d frames in %.2f s (%.0f frames/s); %s",

@@ -37,6 +37,7 @@ from dexcanvas_core.errors import MissingDependencyError, ValidationError
 from dexcanvas_core.mocap.frames import UNITS_M, MocapFrame
 from dexcanvas_core.mocap.mapping import MarkerFileError, MarkerMapping, load_mapping
 from dexcanvas_core.mocap.stream import MarkerStream
+from dexcanvas_core.plausibility import ImplausibleDataError, report
 
 log = logging.getLogger(__name__)
 
@@ -129,6 +130,7 @@ def read_c3d(
         raise MarkerFileError(
             f"{pts.shape[1]} points but only {len(labels)} labels in POINT:LABELS", path=str(p)
         )
+    _check_c3d_frame_count(p, pts.shape[2])
     positions = np.transpose(pts[:3], (2, 1, 0)).copy()  # (T, M, 3)
     rate = float(np.asarray(point["RATE"]["value"]).reshape(-1)[0]) if "RATE" in point else 0.0
     rate = float(fps) if fps else rate
@@ -148,6 +150,47 @@ def read_c3d(
         origin_m=origin_m,
         object_id=object_id,
         side=side,
+    )
+
+
+def c3d_header_frames(path: Path) -> int | None:
+    """The frame count a C3D file's header announces (``last - first + 1``, header words 4
+    and 5), or ``None`` when the header cannot say: not a C3D header, or a file longer than
+    the header's 16-bit frame numbers (last frame 65535)."""
+    with open(path, "rb") as fh:
+        head = fh.read(512)
+        if len(head) < 12 or head[1] != 0x50 or head[0] < 2:
+            return None
+        fh.seek((head[0] - 1) * 512 + 3)
+        processor = fh.read(1)
+    # Parameter-section processor type: 84 Intel, 85 DEC (both little-endian), 86 MIPS (big).
+    order = "big" if processor == bytes([86]) else "little"
+    first = int.from_bytes(head[6:8], order)
+    last = int.from_bytes(head[8:10], order)
+    if last == 0xFFFF or last < first:
+        return None
+    return last - first + 1
+
+
+def _check_c3d_frame_count(path: Path, frames_read: int) -> None:
+    """Refuse a C3D file holding fewer (or more) frames than its header announces: a file cut
+    short by a copy or a crashed export (ezc3d reads what is there without a word)."""
+    announced = c3d_header_frames(path)
+    if announced is None or announced == frames_read:
+        return
+    report(
+        ImplausibleDataError(
+            f"{path}: the C3D header announces {announced} frames but the file holds "
+            f"{frames_read}"
+            + (
+                f" (frames {frames_read}..{announced - 1} missing: truncated?)"
+                if frames_read < announced
+                else ""
+            ),
+            field="C3D frames",
+            frame=frames_read,
+            fix="copy or export the file again",
+        )
     )
 
 

@@ -8,7 +8,11 @@ wrench about its centre of mass, the solver settings, the simulated hand's joint
 targets in the public ``urdf_dof`` layout, and metrics:
 
 * ``success`` (DexCanvas rule: every frame's object position error ≤ 5 cm, the whole clip
-  tracked), ``success_loose`` (mean < 10 cm and < 0.5 rad), mean/max errors;
+  tracked, and no solver blow-up), ``success_loose`` (mean < 10 cm and < 0.5 rad), mean/max
+  errors;
+* ``mujoco_warnings``: ``{type: {"count", "first_frame"}}`` of MuJoCo's warnings
+  (:mod:`dexcanvas_core.sim.mj_warnings`; empty: none) — ``BADQACC``, ``BADQVEL`` or
+  ``BADQPOS`` make the run a failure;
 * ``compute_s_per_demo_s`` (CPU time of the tracking process — one core — per second of
   demonstration);
 * physical consistency: ``newton_euler_sim`` — ‖F_hand + F_table + m·g − m·a_sim‖ / (m·g) per frame
@@ -223,7 +227,12 @@ def _result(traj, cfg, geometry, ref, scene, env, log, cpu_s) -> SimResult:
     off_table = (gap > 0.01) & (np.linalg.norm(table[:, :3], axis=1) < 1e-6)
     hold = off_table & (np.linalg.norm(a_cap, axis=1) < 0.5)
     touch = np.linalg.norm(finger, axis=2).sum(axis=1) > 1e-3  # frames with hand contact
-    success = env.failed_at is None and T == ref.num_frames and bool(np.all(pos_err <= 0.05))
+    success = (
+        env.failed_at is None
+        and T == ref.num_frames
+        and bool(np.all(pos_err <= 0.05))
+        and not env.warnings.blew_up
+    )
     metrics = {
         "uuid": traj.uuid,
         "object": traj.object.name,
@@ -257,6 +266,7 @@ def _result(traj, cfg, geometry, ref, scene, env, log, cpu_s) -> SimResult:
         "hinge_clip_max_rad": float(ref.hinge_clip.max()),
         "config": cfg.as_dict(),
         "object_held_until_frame": int(env.hold_until),
+        "mujoco_warnings": env.warnings.to_dict(),
     }
     qpos = np.asarray(log.hand_qpos)
     metrics["failure"] = failure_diagnosis(
@@ -301,7 +311,13 @@ def _annotate(traj, cfg, scene, ref, log, wrench, metrics) -> Trajectory:
     extras["sim_object_rot_aa"] = obj_aa.astype(np.float32).tolist()
     extras["approximate_object"] = bool(metrics["approximate_object"])
     extras["sim_metrics"] = json.dumps(
-        {k: v for k, v in metrics.items() if k != "config"}, sort_keys=True, default=float
+        {
+            k: v
+            for k, v in metrics.items()
+            if k != "config" and not (k == "mujoco_warnings" and not v)
+        },
+        sort_keys=True,
+        default=float,
     )
     solver = cfg.physics.as_dict(traj.fps)
     solver["tracker"] = cfg.tracker

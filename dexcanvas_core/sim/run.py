@@ -25,6 +25,7 @@ from dexcanvas_core.errors import DatasetError, MissingDependencyError, UnknownN
 from dexcanvas_core.io import open_dataset, write_dataset
 from dexcanvas_core.loaders.selection import load_demonstration, load_row, subject_of
 from dexcanvas_core.safe_io import atomic_write_text, check_output, output_lock
+from dexcanvas_core.sim.mj_warnings import blew_up, describe
 from dexcanvas_core.sim.pipeline import SimConfig, simulate
 from dexcanvas_core.sim.plots import plot_finger_forces
 from dexcanvas_core.sim.synthesis import PerturbationRanges, synthesize_one
@@ -118,6 +119,9 @@ def print_summary(m: dict, out: Path) -> None:
         f"rotation mean {np.degrees(m['object_rot_err_mean_rad']):.1f}°",
     )
     t.add_row("loose rule (mean < 10 cm, < 0.5 rad)", "yes" if m["success_loose"] else "no")
+    if m.get("mujoco_warnings"):
+        style = "red" if blew_up(m["mujoco_warnings"]) else "yellow"
+        t.add_row("MuJoCo warnings", f"[{style}]{describe(m['mujoco_warnings'])}[/{style}]")
     obj = f"{1000 * m['mass_kg']:.0f} g"
     if m.get("approximate_object"):
         obj += (

@@ -42,6 +42,7 @@ from dexcanvas_core.sim.forces import (
 )
 from dexcanvas_core.sim.grip import contact_keeping_force, squeeze_offsets
 from dexcanvas_core.sim.hand import FINGER_HINGES, HAND_JOINTS
+from dexcanvas_core.sim.mj_warnings import WarningCounter
 from dexcanvas_core.sim.physics import carried_load
 from dexcanvas_core.sim.reference import Reference
 from dexcanvas_core.sim.signal import moving_average
@@ -255,6 +256,7 @@ class TrackingEnv:
         sc, ref, cfg = self.scene, self.ref, self.cfg
         m, d = sc.model, sc.data
         mujoco.mj_resetData(m, d)
+        self.warnings = WarningCounter()  # MuJoCo's, this episode's (settling: frame 0)
         d.qpos[sc.hand.qpos_adr] = self.qpos0
         a = sc.object_qpos_adr
         d.qpos[a : a + 3] = ref.object_pos[0]
@@ -274,6 +276,7 @@ class TrackingEnv:
             self._set_hold(False)
         d.qvel[sc.object_dof_adr : sc.object_dof_adr + 6] = 0.0
         mujoco.mj_forward(m, d)
+        self.warnings.update(d, 0)
         acc = FrameAccumulator(1)
         acc.add(read_contacts(sc, d), d.xipos[sc.object_body].copy())
         self._record(finish_frame(acc), self.ctrl_ref[0], np.zeros(self.action_dim))
@@ -398,6 +401,7 @@ class TrackingEnv:
             mujoco.mj_step(m, d)
             acc.add(read_contacts(sc, d), com)
         self.t += 1
+        self.warnings.update(d, self.t)
         err = self._record(finish_frame(acc), target, a)
         if err > self.cfg.fail_pos_m and self.failed_at is None:
             self.failed_at = self.t

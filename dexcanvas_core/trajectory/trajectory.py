@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from dexcanvas_core.errors import ValidationError
+from dexcanvas_core.plausibility import check_trajectory
 from dexcanvas_core.rotations import slerp_aa
 from dexcanvas_core.table import Table
 from dexcanvas_core.trajectory.arrays import check_aa, check_finite, f32
@@ -124,7 +125,9 @@ class Trajectory:
 
     # -- checks ------------------------------------------------------------------------------
     def validate(self, *, fps_tolerance: float = 0.05) -> Trajectory:
-        """Check shapes, finiteness, rotations, timestamps and fps; raise on the first problem.
+        """Check shapes, finiteness, rotations, timestamps and fps, then plausibility (hand
+        scale, human motion limits, outlier frames: :mod:`dexcanvas_core.plausibility`, which
+        only warns under ``allowing_implausible``); raise on the first problem.
 
         Rotations: axis-angle norms must be below 2π (larger norms usually mean degrees were
         stored); per-joint finger rotations below π. Timestamps must be strictly increasing, and
@@ -181,12 +184,6 @@ class Trajectory:
                         field=name,
                     )
                 check_finite(a, f"{where}: hands[{h.name}].{name}", name)
-            check_aa(h.global_rot_aa, 2 * np.pi, f"{where}: hands[{h.name}].mano_global_rot_aa")
-            check_aa(
-                h.hand_pose[:, 3:].reshape(T, 15, 3),
-                np.pi,
-                f"{where}: hands[{h.name}].mano_hand_pose (finger joints)",
-            )
         for o in self.objects:
             for name, a in (("pos", o.pos), ("rot_aa", o.rot_aa)):
                 if a.shape[0] != T:
@@ -196,7 +193,6 @@ class Trajectory:
                         field=name,
                     )
                 check_finite(a, f"{where}: objects[{o.name}].{name}", name)
-            check_aa(o.rot_aa, 2 * np.pi, f"{where}: objects[{o.name}].rot_aa")
         for m in self.object_move:
             if not (0 <= m.start_frame <= m.end_frame < T):
                 raise ValidationError(
@@ -223,6 +219,17 @@ class Trajectory:
                 check_finite(v, f"{where}: contact.{k}", k)
         if self.object_wrench_world is not None:
             check_finite(self.object_wrench_world, f"{where}: object_wrench_world", "wrench")
+        # Units before rotations: a unit mistake also garbles the rotations fitted from it.
+        check_trajectory(self)
+        for h in self.hands:
+            check_aa(h.global_rot_aa, 2 * np.pi, f"{where}: hands[{h.name}].mano_global_rot_aa")
+            check_aa(
+                h.hand_pose[:, 3:].reshape(T, 15, 3),
+                np.pi,
+                f"{where}: hands[{h.name}].mano_hand_pose (finger joints)",
+            )
+        for o in self.objects:
+            check_aa(o.rot_aa, 2 * np.pi, f"{where}: objects[{o.name}].rot_aa")
         return self
 
     # -- time operations ---------------------------------------------------------------------
