@@ -307,8 +307,6 @@ def _add_keypoints_args(p: argparse.ArgumentParser) -> None:
 
 
 def _keypoints_config(args: argparse.Namespace):
-    if not args.fps > 0:
-        raise SystemExit("retarget keypoints: error: --fps must be positive")
     # Lazy: start-up time of ``retarget --help`` (module docstring).
     from retarget.keypoint_input import KeypointsConfig
 

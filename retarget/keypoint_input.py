@@ -16,7 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dexcanvas_core.keypoints import MANO21, convert_keypoints
+from dexcanvas_core.checks import check_array, check_float, check_path, check_str
+from dexcanvas_core.keypoints import MANO21, ORDERS, convert_keypoints
 from dexcanvas_core.mano import HandSkeleton
 from dexcanvas_core.rotations import matrix_to_aa
 from dexcanvas_core.trajectory import HandTrack, Trajectory
@@ -35,6 +36,15 @@ class KeypointsConfig:
     out: Path
     order: str = "mano21"
     units: str = "m"
+
+    def __post_init__(self) -> None:
+        err = RetargetError
+        check_str("hand", self.hand, error=err)
+        check_path("input", self.input, error=err)
+        check_float("fps", self.fps, positive=True, error=err)
+        check_path("out", self.out, error=err)
+        check_str("order", self.order, choices=tuple(ORDERS), error=err)
+        check_str("units", self.units, choices=("m", "cm", "mm"), error=err)
 
 
 _PALM = [MANO21.index(k) for k in ("wrist", "index1", "middle1", "pinky1", "ring1")]
@@ -65,14 +75,12 @@ def keypoints_to_trajectory(
         fps: frame rate [Hz].
         order: ``"mano21"`` or ``"openpose21"``.
     """
-    kp = np.asarray(keypoints, dtype=np.float64)
-    if kp.ndim != 3 or kp.shape[1:] != (21, 3):
-        raise RetargetError(f"keypoints must have shape (T, 21, 3), got {kp.shape}")
+    kp = check_array("keypoints", keypoints, (None, 21, 3), finite=False, error=RetargetError)
     if not np.all(np.isfinite(kp)):
         bad = int(np.argwhere(~np.isfinite(kp))[0, 0])
         raise RetargetError(f"keypoints contain NaN or inf (first at frame {bad}); fill gaps first")
-    if not (np.isfinite(fps) and fps > 0):
-        raise RetargetError(f"fps must be positive, got {fps}")
+    fps = check_float("fps", fps, positive=True, error=RetargetError)
+    check_str("order", order, choices=tuple(ORDERS), error=RetargetError)
     if order != "mano21":
         kp = convert_keypoints(kp, order, "mano21")
     rest = HandSkeleton.default(side).rest_keypoints

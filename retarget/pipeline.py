@@ -19,6 +19,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from dexcanvas_core.checks import check_bool, check_float, check_int, check_path, check_str
 from dexcanvas_core.objects.geometry import ObjectGeometry, object_geometry
 from dexcanvas_core.sim.mpc import MPCConfig
 from dexcanvas_core.sim.pipeline import SimConfig, simulate
@@ -109,6 +110,23 @@ class RunConfig:
     """Show progress bars and the summary on the terminal."""
 
     def __post_init__(self) -> None:
+        err = RetargetError
+        check_str("hand", self.hand, error=err)
+        check_str("pair", self.pair, optional=True, error=err)
+        check_path("dataset", self.dataset, optional=True, error=err)
+        check_int("index", self.index, min=0, error=err)
+        check_path("out", self.out, optional=True, error=err)
+        check_str("backend", self.backend, choices=("pinocchio", "mink"), error=err)
+        for name in ("forces", "refine", "human_replay", "progress"):
+            check_bool(name, getattr(self, name), error=err)
+        check_int("refine_retries", self.refine_retries, min=0, error=err)
+        check_int("calibrate_iterations", self.calibrate_iterations, min=0, error=err)
+        check_float("force_scale", self.force_scale, positive=True, error=err)
+        if not isinstance(self.overrides, dict):
+            raise RetargetError(
+                f"overrides must be a dict of RetargetConfig fields, got {self.overrides!r} "
+                f"({type(self.overrides).__name__})"
+            )
         object.__setattr__(self, "time_scale", check_time_scale(self.time_scale))
 
     def output_dir(self) -> Path:
