@@ -117,6 +117,7 @@ def builtin_pair_path(pair) -> Path:
 def builtin_demonstration_cached(pair) -> Path | None:
     """The dataset already holding ``pair``'s built-in demonstration (the whole set, else the
     pair's own), or None when using it would build it."""
+    pair = pair if isinstance(pair, Pair) else Pair.parse(pair)  # a bad pair fails here
     whole = cache_dir() / builtin_dataset_name()
     if _built(whole):
         return whole

@@ -19,9 +19,13 @@ objects must be a list of strings, got 'cube2' (str); for one value write ['cube
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 import numbers
 import os
+import types
+import typing
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -34,7 +38,9 @@ ErrorFactory = Callable[[str], Exception]
 
 def _shown(value: object) -> str:
     """``repr`` of a value (cut to 60 characters) and its type name."""
-    r = repr(value)
+    if isinstance(value, np.ndarray):
+        return f"an array of shape {value.shape} ({value.dtype})"
+    r = " ".join(repr(value).split())  # one line
     if len(r) > 60:
         r = r[:57] + "..."
     return f"{r} ({type(value).__name__})"
@@ -186,3 +192,59 @@ def check_array(
         msg = f"{name} must be finite, got {a[at]} at index {list(at)}"
         raise ValidationError(msg, field=name) if error is ValidationError else error(msg)
     return a
+
+
+@functools.cache
+def _field_types(cls: type) -> tuple[tuple[str, object], ...]:
+    """``(field name, resolved annotation)`` of a dataclass; ``()`` when its annotations do
+    not resolve (a name only imported under ``TYPE_CHECKING``)."""
+    try:
+        hints = typing.get_type_hints(cls)
+    except (NameError, TypeError):  # unresolvable annotations: nothing to check by type
+        return ()
+    return tuple((f.name, hints[f.name]) for f in dataclasses.fields(cls) if f.name in hints)
+
+
+def check_fields(obj: object, *, error: ErrorFactory = ValidationError) -> None:
+    """Check the fields of dataclass ``obj`` whose annotation is ``int``, ``float``, ``bool``,
+    ``str`` or a ``Literal`` of strings (each possibly ``| None``) against it: a ``'3'`` for an
+    ``int`` is refused, naming ``Class.field``. Values are not changed; other annotations are
+    not checked (``__post_init__`` checks ranges and the rest)."""
+    owner = type(obj).__name__
+    for name, hint in _field_types(type(obj)):
+        value = getattr(obj, name)
+        args = typing.get_args(hint)
+        if typing.get_origin(hint) in (typing.Union, types.UnionType):
+            if type(None) in args and value is None:
+                continue
+            inner = [a for a in args if a is not type(None)]
+            if len(inner) != 1:
+                continue
+            hint = inner[0]
+            args = typing.get_args(hint)
+        label = f"{owner}.{name}"
+        if hint is bool:
+            check_bool(label, value, error=error)
+        elif hint is int:
+            check_int(label, value, error=error)
+        elif hint is float:
+            check_number(label, value, error=error)
+        elif hint is str:
+            check_str(label, value, empty=True, error=error)
+        elif typing.get_origin(hint) is typing.Literal and all(isinstance(a, str) for a in args):
+            check_str(label, value, choices=args, error=error)
+
+
+def check_type(
+    name: str, value: object, kinds: type | tuple[type, ...], *, hint: str = "",
+    optional: bool = False, error: ErrorFactory = ValidationError,
+) -> object:  # fmt: skip
+    """``value`` unchanged if it is an instance of ``kinds`` (``None`` too when ``optional``);
+    ``hint`` ends the message (how to make one, e.g. ``"; use get_hand('shadow')"``)."""
+    if value is None and optional:
+        return None
+    if not isinstance(value, kinds):
+        ks = kinds if isinstance(kinds, tuple) else (kinds,)
+        expected = " or ".join(f"a {k.__name__}" for k in ks) + (" or None" if optional else "")
+        _raise(error, name, value, expected, hint)
+    return value

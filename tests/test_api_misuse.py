@@ -6,13 +6,35 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dexcanvas_core import DexCanvasDataset, Trajectory, load_demonstration
+from dexcanvas_core import (
+    DexCanvasDataset,
+    Trajectory,
+    builtin_demonstration_path,
+    hand_model,
+    load_demonstration,
+    make_dataloader,
+)
 from dexcanvas_core.builtin import rebuild_builtin
 from dexcanvas_core.checks import check_array, check_float, check_int, check_str_seq
 from dexcanvas_core.cli import ExampleConfig, ExportConfig, InfoConfig
 from dexcanvas_core.errors import DexCanvasError, ValidationError
 from dexcanvas_core.io import build_filter, open_dataset
-from retarget import RunConfig, get_hand, retarget_keypoints
+from retarget import (
+    ForceCalibrationConfig,
+    RefineConfig,
+    RetargetConfig,
+    Retargeter,
+    RunConfig,
+    ValidateConfig,
+    get_hand,
+    refine_lost,
+    retarget_demonstration,
+    retarget_keypoints,
+    run_metrics,
+    run_pipeline,
+    run_retarget,
+    write_run,
+)
 from retarget.errors import RetargetError
 from retarget.keypoint_input import KeypointsConfig, keypoints_to_trajectory
 
@@ -40,6 +62,11 @@ DEXCANVAS_CASES = [
     (lambda: InfoConfig(None), "path", "None"),
     (lambda: ExportConfig("a.lance", "b.parquet", objects="cube2"), "objects", "['cube2']"),
     (lambda: ExampleConfig("ex.lance", seed="1"), "seed", "'1' (str)"),
+    (lambda: hand_model("1.1"), "scale", "'1.1' (str)"),
+    (lambda: make_dataloader("ex.lance"), "dataset", "DexCanvasDataset(path)"),
+    (lambda: make_dataloader([1, 2], batch_size="4"), "batch_size", "'4' (str)"),
+    (lambda: make_dataloader([1, 2], num_workers=-1), "num_workers", ">= 0"),
+    (lambda: builtin_demonstration_path(["cube2/tripod"]), "pair", "list"),
 ]
 
 RETARGET_CASES = [
@@ -65,6 +92,21 @@ RETARGET_CASES = [
     (lambda: retarget_keypoints(get_hand("leap"), KP, fps=None), "fps", "None"),
     (lambda: KeypointsConfig("leap", Path("k.npy"), "30", Path("o")), "fps", "'30' (str)"),
     (lambda: KeypointsConfig("leap", Path("k.npy"), 30.0, Path("o"), units="in"), "units", "'in'"),
+    (lambda: RetargetConfig.from_overrides({"w_contacts": "1"}), "weight", "'1' (str)"),
+    (lambda: RetargetConfig.from_overrides({"iterations": 2.0}), "iterations", "2.0"),
+    (lambda: ValidateConfig(settle_s="0.3"), "ValidateConfig.settle_s", "'0.3' (str)"),
+    (lambda: ValidateConfig(table=1), "ValidateConfig.table", "1 (int)"),
+    (lambda: RefineConfig(retries="1"), "RefineConfig.retries", "'1' (str)"),
+    (lambda: RefineConfig(tracker=None), "RefineConfig.tracker", "None"),
+    (lambda: ForceCalibrationConfig(iterations=2.0), "ForceCalibrationConfig.iterations", "2.0"),
+    (lambda: Retargeter("shadow"), "hand", "get_hand"),
+    (lambda: Retargeter(get_hand("panda"), config={}), "config", "dict"),
+    (lambda: retarget_demonstration(KP, "cube2/tripod", "panda"), "traj", "(4, 21, 3)"),
+    (lambda: run_pipeline({"hand": "shadow"}), "cfg", "RunConfig(hand="),
+    (lambda: run_retarget("shadow"), "cfg", "'shadow' (str)"),
+    (lambda: run_metrics(None, None), "result", "PipelineResult"),
+    (lambda: write_run("out", None, {}), "result", "PipelineResult"),
+    (lambda: refine_lost(None, RefineConfig()), "result", "PipelineResult"),
 ]
 
 
