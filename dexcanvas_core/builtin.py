@@ -30,6 +30,7 @@ import sys
 from pathlib import Path
 
 from dexcanvas_core.cache import cache_dir
+from dexcanvas_core.checks import check_str_seq
 from dexcanvas_core.demos import DEMOS_VERSION, DemoError, build_builtin, builtin_plan
 from dexcanvas_core.errors import DatasetError
 from dexcanvas_core.taxonomy import OBJECTS, Pair, custom_objects
@@ -116,6 +117,7 @@ def builtin_pair_path(pair) -> Path:
 def builtin_demonstration_cached(pair) -> Path | None:
     """The dataset already holding ``pair``'s built-in demonstration (the whole set, else the
     pair's own), or None when using it would build it."""
+    pair = pair if isinstance(pair, Pair) else Pair.parse(pair)  # a bad pair fails here
     whole = cache_dir() / builtin_dataset_name()
     if _built(whole):
         return whole
@@ -163,3 +165,40 @@ def builtin_demonstration_path(pair, progress: bool | None = None) -> Path:
 
 def _show(progress: bool | None) -> bool:
     return sys.stderr.isatty() if progress is None else bool(progress)
+
+
+def rebuild_builtin(
+    pairs=None, progress: bool | None = None, workers: int | None = None
+) -> list[Path]:
+    """Build the built-in demonstrations again, replacing what the cache holds (a corrupt or
+    partial copy included); the paths built.
+
+    Args:
+        pairs: ``None``: the whole set (:func:`default_dataset_path`'s dataset); else only these
+            pairs' own caches (:func:`builtin_pair_path`, ``"cube2/tripod"`` or ``Pair``).
+        progress: show a progress bar on stderr (default: when stderr is a terminal).
+        workers: processes generating the whole set (default ``os.cpu_count()``).
+
+    Raises:
+        ValidationError: ``pairs`` is a single string instead of a list.
+        DatasetError: a pair that the built-in set does not hold.
+    """
+    if pairs is None:
+        path = cache_dir() / builtin_dataset_name()
+        with _build_lock(path):
+            workers = workers or os.cpu_count() or 1
+            log.info("rebuilding the built-in dataset at %s (%d processes)", path, workers)
+            build_builtin(path, progress=_show(progress), workers=workers)
+        return [path]
+    if isinstance(pairs, str | bytes):
+        check_str_seq("pairs", pairs)  # raises: one pair is written ["cube2/tripod"]
+    pairs = tuple(pairs)
+    builtin_plan(list(pairs))  # raises DatasetError for a pair the built-in set does not hold
+    built = []
+    for pair in pairs:
+        path = builtin_pair_path(pair)
+        with _build_lock(path):
+            log.info("rebuilding the built-in demonstration of %s at %s", pair, path)
+            build_builtin(path, progress=_show(progress), pairs=[pair])
+        built.append(path)
+    return built

@@ -13,9 +13,21 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from dexcanvas_core import __version__
+from dexcanvas_core.builtin import default_dataset_path, rebuild_builtin
+from dexcanvas_core.cache import cache_dir, cache_entries, clear_cache, clearable_entries
 from dexcanvas_core.capture.cli import add_import_parser, run_import_command
+from dexcanvas_core.checks import check_bool, check_int, check_path, check_str_seq
+from dexcanvas_core.cli_help import (
+    BUILTIN,
+    EXIT_CODES_EPILOG,
+    HelpFormatter,
+    add_dataset_option,
+    add_legacy_dataset_positional,
+    dataset_from_args,
+    examples_epilog,
+)
 from dexcanvas_core.demos import BuildConfig, run_build
-from dexcanvas_core.errors import DatasetError, DexCanvasError
+from dexcanvas_core.errors import DatasetError, DexCanvasError, ValidationError
 from dexcanvas_core.example import build_example_dataset
 from dexcanvas_core.exits import EXIT_FAILED, EXIT_OK, run_command
 from dexcanvas_core.io import export_parquet, open_dataset
@@ -37,8 +49,16 @@ def _human_bytes(n: int) -> str:
 
 @dataclass(frozen=True)
 class InfoConfig:
+    """``dexcanvas info``: which dataset to summarise, and how."""
+
     path: Path
+    """The Lance dataset (``str`` or ``Path``)."""
     as_json: bool = False
+    """Print JSON instead of tables."""
+
+    def __post_init__(self) -> None:
+        check_path("path", self.path)
+        check_bool("as_json", self.as_json)
 
 
 def run_info(cfg: InfoConfig) -> dict:
@@ -75,7 +95,13 @@ def run_info(cfg: InfoConfig) -> dict:
 
 @dataclass(frozen=True)
 class ValidateConfig:
+    """``dexcanvas validate``: the dataset whose every row is checked."""
+
     path: Path
+    """The Lance dataset (``str`` or ``Path``)."""
+
+    def __post_init__(self) -> None:
+        check_path("path", self.path)
 
 
 def run_validate(cfg: ValidateConfig) -> int:
@@ -106,13 +132,29 @@ def run_validate(cfg: ValidateConfig) -> int:
 
 @dataclass(frozen=True)
 class ExportConfig:
+    """``dexcanvas export``: a dataset, the Parquet file to write and the optional filters."""
+
     path: Path
+    """The Lance dataset (``str`` or ``Path``)."""
     out: Path
+    """The ``.parquet`` file written."""
     objects: tuple[str, ...] = ()
+    """Only these object ids (empty: all)."""
     manipulation_types: tuple[str, ...] = ()
+    """Only these manipulation types, names or codes (empty: all)."""
     operators: tuple[str, ...] = ()
+    """Only these operators (empty: all)."""
+
     overwrite: bool = False
     """Replace an existing Parquet file; without it one is refused before any work."""
+
+    def __post_init__(self) -> None:
+        check_path("path", self.path)
+        check_path("out", self.out)
+        check_str_seq("objects", self.objects, optional=False)
+        check_str_seq("manipulation_types", self.manipulation_types, optional=False, codes=True)
+        check_str_seq("operators", self.operators, optional=False)
+        check_bool("overwrite", self.overwrite)
 
 
 def run_export(cfg: ExportConfig) -> Path:
@@ -139,9 +181,19 @@ def run_export(cfg: ExportConfig) -> Path:
 
 @dataclass(frozen=True)
 class ExampleConfig:
+    """``dexcanvas example``: where to write the example dataset."""
+
     out: Path
+    """Output dataset directory (``*.lance``)."""
     seed: int = 0
+    """Generator seed."""
     overwrite: bool = False
+    """Replace an existing dataset at ``out``."""
+
+    def __post_init__(self) -> None:
+        check_path("out", self.out)
+        check_int("seed", self.seed, min=0)
+        check_bool("overwrite", self.overwrite)
 
 
 def run_example(cfg: ExampleConfig) -> Path:
@@ -149,6 +201,60 @@ def run_example(cfg: ExampleConfig) -> Path:
     out = build_example_dataset(cfg.out, seed=cfg.seed, overwrite=cfg.overwrite, progress=True)
     print(f"wrote {out}")
     return out
+
+
+def read_dataset_path(value: Path | str) -> Path:
+    """The dataset a reading command opens: ``--dataset builtin`` is the whole built-in set
+    (built on first use, with progress), a path is itself."""
+    return default_dataset_path(progress=True) if value == BUILTIN else Path(value)
+
+
+def run_cache_path() -> Path:
+    """``dexcanvas cache path``: the cache directory, then each entry's size and kind."""
+    root = cache_dir()
+    print(root)
+    entries = cache_entries(root)
+    if not entries:
+        print("  (empty)" if root.is_dir() else "  (not created yet)")
+    for path, kind, size in entries:
+        print(f"  {_human_bytes(size):>10}  {path.name}  ({kind})")
+    return root
+
+
+def run_cache_clear(yes: bool) -> int:
+    """``dexcanvas cache clear``: remove the built-in demonstrations and object shapes after a
+    confirmation (``yes``: without); the exit code."""
+    root = cache_dir()
+    entries = clearable_entries(root)
+    if not entries:
+        print(f"nothing to clear in {root}")
+        return EXIT_OK
+    total = _human_bytes(sum(size for _, _, size in entries))
+    if not yes:
+        if not sys.stdin.isatty():
+            raise ValidationError(
+                f"would remove {len(entries)} entries ({total}) from {root}; no terminal to "
+                "confirm: pass --yes"
+            )
+        for path, kind, size in entries:
+            print(f"  {_human_bytes(size):>10}  {path.name}  ({kind})")
+        answer = input(f"remove these {len(entries)} entries ({total}) from {root}? [y/N] ")
+        if answer.strip().lower() not in ("y", "yes"):
+            print("nothing removed")
+            return EXIT_OK
+    removed = clear_cache(root)
+    print(f"removed {len(removed)} entries ({total}) from {root}")
+    return EXIT_OK
+
+
+def run_cache_rebuild(pairs: list[str] | None, workers: int | None) -> list[Path]:
+    """``dexcanvas cache rebuild``: the built-in set (or ``pairs``' own caches) built again."""
+    if workers is not None:
+        check_int("--workers", workers, min=1)
+    built = rebuild_builtin(pairs, progress=True, workers=workers)
+    for path in built:
+        print(f"built {path}")
+    return built
 
 
 def run_demos_build_command(args: argparse.Namespace) -> int:
@@ -218,7 +324,7 @@ def run_simulate_command(args: argparse.Namespace) -> dict:
         SimulateConfig(
             pair=args.pair,
             out=args.out,
-            dataset=args.dataset,
+            dataset=None if args.dataset == BUILTIN else args.dataset,
             index=args.index,
             sim=_sim_config(args),
             overwrite=args.overwrite,
@@ -249,7 +355,7 @@ def run_synthesize_command(args: argparse.Namespace) -> dict:
     )
     return run_synthesize(
         SynthesizeConfig(
-            dataset=args.dataset,
+            dataset=read_dataset_path(args.dataset),
             out=args.out,
             expand=args.expand,
             seed=args.seed,
@@ -266,8 +372,25 @@ def _add_tracker_args(s: argparse.ArgumentParser) -> None:
     s.add_argument("--tracker", choices=["mpc", "open_loop"], default="mpc",
                    help="sampling MPC (default) or the reference replayed open loop")  # fmt: skip
     s.add_argument("--samples", type=int, default=16, help="MPC samples per replan")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=int, default=0, help="seed of the MPC's sampling")
     s.add_argument("--overwrite", action="store_true", help="replace an existing output")
+
+
+def _command(sub, name: str, help: str, description: str, *examples: str):
+    """A sub-command parser with its one-line help, a description and an examples epilog."""
+    return sub.add_parser(
+        name,
+        help=help,
+        description=description,
+        epilog=examples_epilog(*examples),
+        formatter_class=HelpFormatter,
+    )
+
+
+def _add_dataset_reading(s: argparse.ArgumentParser) -> None:
+    """``--dataset`` of a command that reads a whole dataset, with the deprecated positional."""
+    add_dataset_option(s, note="required; the whole built-in set is built on first use")
+    add_legacy_dataset_positional(s)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -275,68 +398,123 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = argparse.ArgumentParser(
         prog="dexcanvas",
-        description="DexCanvas human demonstrations: inspect, validate, export, build examples.",
+        description="DexCanvas human demonstrations: inspect, validate, export, build examples, "
+        "fit mocap, simulate forces, synthesize, import captures, manage the cache.",
+        epilog=examples_epilog(
+            "dexcanvas info --dataset builtin",
+            "dexcanvas simulate --pair cube2/tripod --out sim.lance",
+            "dexcanvas COMMAND --help     # each command's options and examples",
+        )
+        + "\n\n"
+        + EXIT_CODES_EPILOG,
+        formatter_class=HelpFormatter,
     )
     p.add_argument("--version", action="version", version=f"dexcanvas-retarget {__version__}")
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    s = sub.add_parser(
-        "info", help="summarise a Lance dataset (rows, pairs, operators, frames, fps, size)"
-    )
-    s.add_argument("path", type=Path, help="dataset directory (*.lance)")
+    s = _command(
+        sub, "info", "summarise a Lance dataset (rows, pairs, operators, frames, fps, size)",
+        "Summarise a DexCanvas-layout Lance dataset: rows, (object, manipulation type) pairs, "
+        "operators, frames,\nframe rates, contacts, size on disk and schema version. Reads the "
+        "metadata only.",
+        "dexcanvas info --dataset builtin",
+        "dexcanvas info --dataset ex.lance --json",
+    )  # fmt: skip
+    _add_dataset_reading(s)
     s.add_argument("--json", action="store_true", help="print JSON instead of tables")
 
-    s = sub.add_parser(
-        "validate", help="check every row of a dataset (shapes, NaNs, rotations, fps)"
-    )
-    s.add_argument("path", type=Path)
+    s = _command(
+        sub, "validate", "check every row of a dataset (shapes, NaNs, rotations, fps)",
+        "Read every row of a dataset with full validation (shapes, finiteness, rotations, "
+        "timestamps, fps)\nand print the first problem of each bad row. Exit 3 when a row is "
+        "invalid.",
+        "dexcanvas validate --dataset ex.lance",
+        "dexcanvas validate --dataset builtin",
+    )  # fmt: skip
+    _add_dataset_reading(s)
     add_allow_implausible(s)
 
-    s = sub.add_parser("export", help="export a dataset (optionally filtered) to Parquet")
-    s.add_argument("path", type=Path)
+    s = _command(
+        sub, "export", "export a dataset (optionally filtered) to Parquet",
+        "Export a dataset's rows to one Parquet file, optionally only some objects, "
+        "manipulation types\nor operators (each filter: one or more values).",
+        "dexcanvas export --dataset ex.lance --parquet ex.parquet",
+        "dexcanvas export --dataset builtin --parquet cubes.parquet --objects cube2 cube2h",
+    )  # fmt: skip
+    _add_dataset_reading(s)
     s.add_argument("--parquet", type=Path, required=True, dest="out", help="output .parquet file")
-    s.add_argument("--objects", nargs="*", default=[], help="object ids, e.g. cube2 sphere1")
-    s.add_argument("--types", nargs="*", default=[], help="manipulation types (names or codes)")
-    s.add_argument("--operators", nargs="*", default=[])
+    s.add_argument("--objects", nargs="*", default=[],
+                   help="only these object ids, e.g. cube2 sphere1 (default: all)")  # fmt: skip
+    s.add_argument("--types", nargs="*", default=[],
+                   help="only these manipulation types, names or codes (default: all)")  # fmt: skip
+    s.add_argument("--operators", nargs="*", default=[],
+                   help="only these operators (default: all)")  # fmt: skip
     s.add_argument("--overwrite", action="store_true", help="replace an existing --parquet file")
     add_allow_implausible(s)
 
-    s = sub.add_parser("demos", help="generated human demonstrations")
+    s = _command(
+        sub, "demos", "generated human demonstrations",
+        "Generated human demonstrations (the generator behind the built-in set).",
+        "dexcanvas demos build --out demos.lance --pairs cube2/tripod --reps 3",
+    )  # fmt: skip
     demos_sub = s.add_subparsers(dest="demos_command", required=True, metavar="SUBCOMMAND")
-    b = demos_sub.add_parser("build", help="generate demonstrations into a Lance dataset")
+    b = _command(
+        demos_sub, "build", "generate demonstrations into a Lance dataset",
+        "Generate demonstrations of (object, manipulation type) pairs into a Lance dataset; "
+        "every one\npasses the plausibility checks or is reported as failed (exit 3).",
+        "dexcanvas demos build --out demos.lance",
+        "dexcanvas demos build --out two.lance --pairs cube2/tripod sphere1/power_sphere "
+        "--reps 2 --workers 2",
+    )  # fmt: skip
     b.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
     b.add_argument(
         "--pairs", nargs="*", default=None, help="OBJECT/TYPE pairs (default: every feasible pair)"
     )
     b.add_argument("--reps", type=int, default=1, help="demonstrations per pair")
-    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--seed", type=int, default=0, help="generator seed")
     b.add_argument("--workers", type=int, default=1, help="generator processes")
-    b.add_argument("--overwrite", action="store_true")
+    b.add_argument("--overwrite", action="store_true", help="replace an existing dataset")
     add_object_options(b)
 
-    s = sub.add_parser("fit", help="fit MANO hand + object poses to mocap markers (C3D or CSV)")
+    s = _command(
+        sub, "fit", "fit MANO hand + object poses to mocap markers (C3D or CSV)",
+        "Fit the MANO hand and the object's pose to motion-capture markers (C3D or CSV) and "
+        "write a\ndataset with per-frame quality flags; prints the fit report as JSON.",
+        "dexcanvas fit grasp.c3d --out grasp.lance --object cube2",
+        "dexcanvas fit grasp.csv --out grasp.lance --units mm --fps 100 --mapping names.json",
+    )  # fmt: skip
     s.add_argument("markers", type=Path, help="marker file (.c3d or .csv)")
     s.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
-    s.add_argument("--format", choices=["auto", "c3d", "csv"], default="auto")
+    s.add_argument("--format", choices=["auto", "c3d", "csv"], default="auto",
+                   help="marker file format (auto: from the suffix)")  # fmt: skip
     s.add_argument("--mapping", type=Path, default=None, help="marker-name mapping (JSON or CSV)")
     s.add_argument("--object", default=None, help="catalogue object id carrying obj1..obj4")
     s.add_argument("--fps", type=float, default=None, help="frame rate [Hz] (default: the file's)")
-    s.add_argument("--units", default=None, help="length unit of the file: mm, cm or m")
+    s.add_argument("--units", default=None,
+                   help="length unit of the file: mm, cm or m (default: the file's)")  # fmt: skip
     s.add_argument("--up", choices=["y", "z"], default="y", help="vertical axis of the mocap frame")
-    s.add_argument("--side", choices=["right", "left"], default=None)
-    s.add_argument("--calibration", type=Path, default=None, help="saved subject calibration")
-    s.add_argument("--save-calibration", type=Path, default=None)
-    s.add_argument("--overwrite", action="store_true")
+    s.add_argument("--side", choices=["right", "left"], default=None,
+                   help="hand side (default: from the marker names)")  # fmt: skip
+    s.add_argument("--calibration", type=Path, default=None,
+                   help="saved subject calibration to reuse (default: calibrate now)")  # fmt: skip
+    s.add_argument("--save-calibration", type=Path, default=None, metavar="PATH",
+                   help="write the subject calibration to PATH")  # fmt: skip
+    s.add_argument("--overwrite", action="store_true", help="replace an existing output")
     add_allow_implausible(s)
 
-    s = sub.add_parser(
-        "simulate",
-        help="track a demonstration with the simulated MANO hand; write contacts and forces",
-    )
+    s = _command(
+        sub, "simulate",
+        "track a demonstration with the simulated MANO hand; write contacts and forces",
+        "Track one demonstration with the simulated MANO hand (sampling MPC or open loop) and "
+        "write it\nwith its contacts and contact forces, plus a per-finger force plot. Exit 3 "
+        "when the hand loses the object.",
+        "dexcanvas simulate --pair cube2/tripod --out sim.lance",
+        "dexcanvas simulate --dataset real.lance --index 2 --out sim.lance --samples 32",
+    )  # fmt: skip
     s.add_argument("--pair", default=None,
                    help="OBJECT/TYPE, e.g. cube2/tripod (optional with --dataset)")  # fmt: skip
-    s.add_argument("--dataset", type=Path, default=None, help="Lance dataset (default: built-in)")
+    add_dataset_option(s)
     s.add_argument("--index", type=int, default=0,
                    help="which demonstration of the pair; without --pair, which row")  # fmt: skip
     s.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
@@ -348,22 +526,28 @@ def build_parser() -> argparse.ArgumentParser:
     add_object_options(s)
     _add_tracker_args(s)
 
-    s = sub.add_parser(
-        "synthesize", help="expand a dataset with perturbed, physically tracked rollouts"
-    )
-    s.add_argument("--dataset", type=Path, required=True, help="source Lance dataset")
+    s = _command(
+        sub, "synthesize", "expand a dataset with perturbed, physically tracked rollouts",
+        "Expand a dataset with perturbed copies of each row (object size, mass, friction, hand "
+        "scale,\nplacement), each tracked in physics; only the rollouts that keep the object are "
+        "kept.\nAn interrupted run resumes where it stopped.",
+        "dexcanvas synthesize --dataset builtin --out synth.lance --expand 4 --limit 2",
+        "dexcanvas synthesize --dataset real.lance --out synth.lance --workers 2 --size 0.1",
+    )  # fmt: skip
+    add_dataset_option(s, required=True, what="source Lance dataset")
     s.add_argument("--expand", type=int, default=10, help="rollouts per source row")
     s.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
     s.add_argument("--workers", type=int, default=1, help="processes")
-    s.add_argument("--limit", type=int, default=None, help="only the first N source rows")
+    s.add_argument("--limit", type=int, default=None,
+                   help="only the first N source rows (default: all)")  # fmt: skip
     add_allow_implausible(s)
     from dexcanvas_core.sim.synthesis import PerturbationRanges  # lazy: mujoco ~0.5 s on --help
 
     d = PerturbationRanges()
     g = s.add_argument_group("perturbation half-widths (uniform, relative unless noted)")
-    g.add_argument("--size", type=float, default=d.size, help="object size (default ±20 %%)")
-    g.add_argument("--mass", type=float, default=d.mass)
-    g.add_argument("--friction", type=float, default=d.friction)
+    g.add_argument("--size", type=float, default=d.size, help="object size")
+    g.add_argument("--mass", type=float, default=d.mass, help="object mass")
+    g.add_argument("--friction", type=float, default=d.friction, help="object friction")
     g.add_argument("--hand-scale", type=float, default=d.hand, help="hand skeleton scale")
     g.add_argument("--shift", type=float, default=d.shift_m, help="rigid table shift [m]")
     g.add_argument("--yaw-deg", type=float, default=float(np.rad2deg(d.yaw_rad)),
@@ -371,18 +555,68 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--object-offset", type=float, default=d.object_offset_m,
                    help="object-only offset from the hand [m]")  # fmt: skip
     g.add_argument("--object-offset-yaw-deg", type=float,
-                   default=float(np.rad2deg(d.object_offset_yaw_rad)))  # fmt: skip
+                   default=float(np.rad2deg(d.object_offset_yaw_rad)),
+                   help="object-only yaw about the hand [deg]")  # fmt: skip
     add_object_options(s)
     _add_tracker_args(s)
 
     add_import_parser(sub)
     add_allow_implausible(sub.choices["import"])
 
-    s = sub.add_parser("example", help="write the built-in synthetic example dataset")
+    s = _command(
+        sub, "example", "write the built-in synthetic example dataset",
+        "Write the small synthetic example dataset (public layout: 6 pairs x 3 operators) to "
+        "OUT;\nquick to build, for trying the other commands.",
+        "dexcanvas example --out ex.lance",
+        "dexcanvas example --out ex.lance --seed 1 --overwrite",
+    )  # fmt: skip
     s.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=int, default=0, help="generator seed")
     s.add_argument("--overwrite", action="store_true", help="replace an existing dataset")
+
+    _add_cache_parser(sub)
     return p
+
+
+def _add_cache_parser(sub) -> None:
+    s = _command(
+        sub, "cache", "the cache of built-in demonstrations and object shapes: path, clear, "
+        "rebuild",
+        "The cache directory ($DEXCANVAS_CACHE_DIR, else the platform's user cache) holds the "
+        "built-in\ndemonstrations (built on first use), object collision shapes and the "
+        "tracebacks of internal errors.",
+        "dexcanvas cache path",
+        "dexcanvas cache rebuild --pairs cube2/tripod",
+        "dexcanvas cache clear --yes",
+    )  # fmt: skip
+    cache_sub = s.add_subparsers(dest="cache_command", required=True, metavar="SUBCOMMAND")
+    _command(
+        cache_sub, "path", "print the cache directory and what it holds",
+        "Print the cache directory, then one line per entry: its size and what it is.",
+        "dexcanvas cache path",
+        'du -sh "$(dexcanvas cache path | head -1)"',
+    )  # fmt: skip
+    c = _command(
+        cache_sub, "clear", "remove the built-in demonstrations and object shapes",
+        "Remove the built-in demonstrations and the object collision shapes from the cache "
+        "(rebuilt on\nnext use; tracebacks stay). Asks first, unless --yes; without a terminal "
+        "--yes is required.",
+        "dexcanvas cache clear",
+        "dexcanvas cache clear --yes",
+    )  # fmt: skip
+    c.add_argument("--yes", action="store_true", help="do not ask for confirmation")
+    r = _command(
+        cache_sub, "rebuild", "build the built-in demonstrations again (a corrupt cache too)",
+        "Build the built-in demonstrations again, replacing what the cache holds (the repair for "
+        "a corrupt\nor partial cache), with a progress bar. --pairs: only these pairs' own "
+        "caches (seconds each).",
+        "dexcanvas cache rebuild",
+        "dexcanvas cache rebuild --pairs cube2/tripod sphere1/power_sphere",
+    )  # fmt: skip
+    r.add_argument("--pairs", nargs="+", default=None, metavar="OBJECT/TYPE",
+                   help="only these pairs (default: the whole built-in set)")  # fmt: skip
+    r.add_argument("--workers", type=int, default=None,
+                   help="processes building the whole set (default: the CPU count)")  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -392,16 +626,17 @@ def main(argv: list[str] | None = None) -> int:
     )
 
     def run() -> int:
-        if args.command != "import":  # import reads its --objects for masses only
+        if args.command not in ("import", "cache"):  # import reads its --objects for masses
             use_object_options(args)
         if args.command == "info":
-            run_info(InfoConfig(args.path, args.json))
+            run_info(InfoConfig(read_dataset_path(dataset_from_args(args)), args.json))
         elif args.command == "validate":
-            return EXIT_FAILED if run_validate(ValidateConfig(args.path)) else EXIT_OK
+            cfg = ValidateConfig(read_dataset_path(dataset_from_args(args)))
+            return EXIT_FAILED if run_validate(cfg) else EXIT_OK
         elif args.command == "export":
             run_export(
                 ExportConfig(
-                    args.path,
+                    read_dataset_path(dataset_from_args(args)),
                     args.out,
                     tuple(args.objects),
                     tuple(args.types),
@@ -422,6 +657,13 @@ def main(argv: list[str] | None = None) -> int:
             run_import_command(args)
         elif args.command == "example":
             run_example(ExampleConfig(args.out, args.seed, args.overwrite))
+        elif args.command == "cache":
+            if args.cache_command == "path":
+                run_cache_path()
+            elif args.cache_command == "clear":
+                return run_cache_clear(args.yes)
+            else:
+                run_cache_rebuild(args.pairs, args.workers)
         return EXIT_OK
 
     def run_checked() -> int:

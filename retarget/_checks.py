@@ -7,6 +7,7 @@ import typing
 
 import numpy as np
 
+from dexcanvas_core.checks import check_number
 from retarget.errors import RetargetError
 
 
@@ -36,6 +37,8 @@ def check_range(
     v = getattr(cfg, name)
     if v is None and optional:
         return
+    if v is not None:  # a '1' or True: refused by type, before the comparisons below
+        check_number(f"{type(cfg).__name__}.{name}", v, error=RetargetError)
     ok = v is not None and (np.isfinite(v) or not finite) and (v > 0 if positive else v >= 0)
     if ok and upper is not None:
         ok = v <= upper

@@ -19,6 +19,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from dexcanvas_core.cli_help import (
+    BUILTIN,
+    EXIT_CODES_EPILOG,
+    HelpFormatter,
+    add_dataset_option,
+    examples_epilog,
+)
 from dexcanvas_core.errors import DexCanvasError
 from dexcanvas_core.exits import EXIT_FAILED, EXIT_OK, run_command
 from dexcanvas_core.objects.options import add_object_options, use_object_options
@@ -84,12 +91,7 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
         "--pair", default=None,
         help="OBJECT/TYPE, e.g. cube2/tripod (with --dataset: optional, the row --index is used)",
     )  # fmt: skip
-    p.add_argument(
-        "--dataset",
-        type=Path,
-        default=None,
-        help="DexCanvas Lance dataset (default: the built-in demonstrations)",
-    )
+    add_dataset_option(p)
     p.add_argument("--index", type=int, default=0, help="which demonstration of the pair")
     p.add_argument(
         "--out",
@@ -102,7 +104,9 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="replace the run already in --out (metrics.json, robot_trajectory.npz)",
     )
-    p.add_argument("--backend", choices=["pinocchio", "mink"], default="pinocchio")
+    p.add_argument(
+        "--backend", choices=["pinocchio", "mink"], default="pinocchio", help="IK backend"
+    )
     p.add_argument(
         "--forces",
         action="store_true",
@@ -173,6 +177,11 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
     add_allow_implausible(p)
 
 
+def _dataset(value: Path | str | None) -> Path | None:
+    """``--dataset``: ``builtin`` is the built-in demonstrations (``None`` in the configs)."""
+    return None if value == BUILTIN else value
+
+
 def _run_config(args: argparse.Namespace):
     cfg = _plain_run_config(args)
     if getattr(args, "snapshot", False):
@@ -187,7 +196,7 @@ def _plain_run_config(args: argparse.Namespace):
     return RunConfig(
         hand=args.hand,
         pair=args.pair,
-        dataset=args.dataset,
+        dataset=_dataset(args.dataset),
         index=args.index,
         out=args.out,
         overwrite=args.overwrite,
@@ -211,12 +220,7 @@ def _add_snapshot_args(p: argparse.ArgumentParser) -> None:
     src = p.add_argument_group("what to draw (--hand and --pair, or --run)")
     src.add_argument("--hand", default=None, help="robot hand (see `retarget hands`)")
     src.add_argument("--pair", default=None, help="OBJECT/TYPE, e.g. cube2/tripod")
-    src.add_argument(
-        "--dataset",
-        type=Path,
-        default=None,
-        help="DexCanvas Lance dataset (default: the built-in demonstrations)",
-    )
+    add_dataset_option(src)
     src.add_argument("--index", type=int, default=0, help="which demonstration of the pair")
     src.add_argument(
         "--run", type=Path, default=None, metavar="RUN_DIR", help="draw an existing run directory"
@@ -236,7 +240,12 @@ def _add_snapshot_args(p: argparse.ArgumentParser) -> None:
         default="auto",
         help="headless Chromium (meshcat page) or MuJoCo offscreen; auto: Chromium if installed",
     )
-    p.add_argument("--layout", choices=["side_by_side", "overlay"], default="side_by_side")
+    p.add_argument(
+        "--layout",
+        choices=["side_by_side", "overlay"],
+        default="side_by_side",
+        help="human and robot next to each other, or drawn over each other",
+    )
     p.add_argument(
         "--robot",
         choices=["sim", "kinematic"],
@@ -246,7 +255,9 @@ def _add_snapshot_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--width", type=int, default=800, help="picture width [px]")
     p.add_argument("--height", type=int, default=600, help="picture height [px]")
     p.add_argument("--no-html", action="store_true", help="do not write scene.html")
-    p.add_argument("--backend", choices=["pinocchio", "mink"], default="pinocchio")
+    p.add_argument(
+        "--backend", choices=["pinocchio", "mink"], default="pinocchio", help="IK backend"
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     add_allow_implausible(p)
 
@@ -259,7 +270,7 @@ def _snapshot_config(args: argparse.Namespace):
         out=args.out,
         hand=args.hand,
         pair=args.pair,
-        dataset=args.dataset,
+        dataset=_dataset(args.dataset),
         index=args.index,
         run_dir=args.run,
         frames=parse_frames(args.frames) if args.frames is not None else None,
@@ -290,8 +301,15 @@ def _add_report_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--no-snapshots", action="store_true", help="do not render stills for runs without them"
     )
-    p.add_argument("--renderer", choices=["auto", "chromium", "mujoco"], default="auto")
-    p.add_argument("--plot-format", choices=["png", "svg"], default="png")
+    p.add_argument(
+        "--renderer",
+        choices=["auto", "chromium", "mujoco"],
+        default="auto",
+        help="renderer of the missing stills (auto: Chromium if installed, else MuJoCo)",
+    )
+    p.add_argument(
+        "--plot-format", choices=["png", "svg"], default="png", help="format of the plots"
+    )
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
 
 
@@ -317,8 +335,15 @@ def _add_keypoints_args(p: argparse.ArgumentParser) -> None:
         required=True,
         help="(T, 21, 3) keypoints: .npy, .npz (key 'keypoints') or .csv (63 columns)",
     )
-    p.add_argument("--order", choices=["mano21", "openpose21"], default="mano21")
-    p.add_argument("--units", choices=["m", "cm", "mm"], default="m")
+    p.add_argument(
+        "--order",
+        choices=["mano21", "openpose21"],
+        default="mano21",
+        help="keypoint order of the input",
+    )
+    p.add_argument(
+        "--units", choices=["m", "cm", "mm"], default="m", help="length unit of the input"
+    )
     p.add_argument("--fps", type=float, required=True, help="frame rate [Hz]")
     p.add_argument("--out", type=Path, required=True, help="output directory")  # fmt: skip
     p.add_argument(
@@ -367,6 +392,11 @@ class Command:
     """One sub-command: its help, its arguments, how they become a config, what runs it."""
 
     help: str
+    """One line, in the list of ``retarget --help``."""
+    description: str
+    """What the command does, at the top of its ``--help`` (line breaks kept)."""
+    examples: tuple[str, ...]
+    """One to three example invocations, the epilog of its ``--help``."""
     add_arguments: Callable[[argparse.ArgumentParser], None]
     make_config: Callable[[argparse.Namespace], object]
     run: Callable[[object], object]
@@ -376,6 +406,14 @@ class Command:
 COMMANDS: dict[str, Command] = {
     "run": Command(
         help="retarget a demonstration onto a robot hand, re-simulate it, write metrics",
+        description="Retarget one human demonstration onto a robot hand, re-simulate the "
+        "robot in MuJoCo and write\nrobot_trajectory.npz, metrics.json and a summary into the "
+        "output directory.\nExit 3 when the re-simulated robot loses the object.",
+        examples=(
+            "retarget run --hand shadow --pair cube2/tripod",
+            "retarget run --hand allegro --pair cube2/tripod --forces --out runs/allegro_forces",
+            "retarget run --hand leap --dataset real.lance --index 3 --snapshot",
+        ),
         add_arguments=_add_run_args,
         make_config=_run_config,
         run=cmd_run,
@@ -383,30 +421,60 @@ COMMANDS: dict[str, Command] = {
     ),
     "hands": Command(
         help="list the robot hands: DoF, actuators, finger mapping, model source",
+        description="List the registered robot hands (the values of --hand): degrees of "
+        "freedom, actuators,\ncouplings, which robot finger each human finger drives, size "
+        "and model source.",
+        examples=("retarget hands", "retarget hands --json"),
         add_arguments=_add_hands_args,
         make_config=_hands_config,
         run=run_hands,
     ),
     "keypoints": Command(
         help="retarget a bare 21-keypoint sequence (video or teleoperation; no object)",
+        description="Retarget a bare sequence of 21 hand keypoints (from video or "
+        "teleoperation; no object)\nonto a robot hand and write the joint trajectory.",
+        examples=(
+            "retarget keypoints --hand leap --input hand.npy --fps 30 --out runs/video",
+            "retarget keypoints --hand shadow --input kp.csv --fps 120 --units mm "
+            "--order openpose21 --out runs/kp",
+        ),
         add_arguments=_add_keypoints_args,
         make_config=_keypoints_config,
         run=cmd_keypoints,
     ),
     "calibrate-wrist": Command(
         help="measure a hand's wrist offset from the human wrist (for HandModel.wrist_offset)",
+        description="Measure a robot hand's wrist offset from the human wrist on generated "
+        "demonstrations,\nthe value for HandModel.wrist_offset in its hands/ file.",
+        examples=(
+            "retarget calibrate-wrist --hand leap",
+            "retarget calibrate-wrist --hand shadow --pairs 4 --max-frames 0 --json",
+        ),
         add_arguments=_add_calibrate_args,
         make_config=_calibrate_config,
         run=cmd_calibrate,
     ),
     "snapshot": Command(
         help="stills of chosen frames (headless Chromium or MuJoCo) and the scene as HTML",
+        description="Draw stills of chosen frames of a run (an existing run directory, or "
+        "--hand and --pair run now)\nwith headless Chromium or MuJoCo, and the animated scene "
+        "as one HTML file.",
+        examples=(
+            "retarget snapshot --run runs/shadow_cube2_tripod_0 --out stills",
+            "retarget snapshot --hand shadow --pair cube2/tripod --frames 0,60,120 --out stills",
+        ),
         add_arguments=_add_snapshot_args,
         make_config=_snapshot_config,
         run=cmd_snapshot,
     ),
     "report": Command(
         help="one offline HTML page of runs: metrics, stills, force and error plots, heatmap",
+        description="One self-contained HTML page of one or more runs: metrics, stills, force "
+        "and error plots,\ncontact heatmap. Renders stills for runs without them.",
+        examples=(
+            "retarget report runs/shadow_cube2_tripod_0",
+            "retarget report runs/* --out report.html --no-snapshots",
+        ),
         add_arguments=_add_report_args,
         make_config=_report_config,
         run=cmd_report,
@@ -418,12 +486,26 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="retarget",
         description="Retarget DexCanvas human demonstrations onto robot hands.",
+        epilog=examples_epilog(
+            "retarget hands",
+            "retarget run --hand shadow --pair cube2/tripod",
+            "retarget COMMAND --help     # each command's options and examples",
+        )
+        + "\n\n"
+        + EXIT_CODES_EPILOG,
+        formatter_class=HelpFormatter,
     )
     p.add_argument("--version", action="version", version=f"dexcanvas-retarget {__version__}")
     p.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     for name, cmd in COMMANDS.items():
-        s = sub.add_parser(name, help=cmd.help, description=cmd.help)
+        s = sub.add_parser(
+            name,
+            help=cmd.help,
+            description=cmd.description,
+            epilog=examples_epilog(*cmd.examples),
+            formatter_class=HelpFormatter,
+        )
         cmd.add_arguments(s)
         if name in SCENE_COMMANDS:
             add_object_options(s)

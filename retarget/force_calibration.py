@@ -33,6 +33,7 @@ from dataclasses import asdict, dataclass, field
 import mujoco
 import numpy as np
 
+from dexcanvas_core.checks import check_fields
 from dexcanvas_core.sim.signal import moving_average
 from retarget.errors import RetargetError
 from retarget.force_matching import servo_gains, squeeze_offsets
@@ -56,6 +57,9 @@ class ForceCalibrationConfig:
     """Moving-average window [s] of the per-finger force error."""
     tolerance_n: float = 0.02
     """Force errors [N] below this are left alone."""
+
+    def __post_init__(self) -> None:
+        check_fields(self, error=RetargetError)
 
     def validate(self) -> ForceCalibrationConfig:
         if not (isinstance(self.iterations, int) and self.iterations >= 0):

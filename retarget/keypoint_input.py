@@ -16,7 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dexcanvas_core.keypoints import MANO21, convert_keypoints
+from dexcanvas_core.checks import check_array, check_float, check_path, check_str
+from dexcanvas_core.keypoints import MANO21, ORDERS, convert_keypoints
 from dexcanvas_core.mano import HandSkeleton
 from dexcanvas_core.plausibility import check_fps, check_keypoint_sequence
 from dexcanvas_core.rotations import matrix_to_aa
@@ -40,6 +41,15 @@ class KeypointsConfig:
     units: str = "m"
     overwrite: bool = False
     """Replace the trajectory already in ``out``; without it one is refused before any work."""
+
+    def __post_init__(self) -> None:
+        err = RetargetError
+        check_str("hand", self.hand, error=err)
+        check_path("input", self.input, error=err)
+        check_float("fps", self.fps, positive=True, error=err)
+        check_path("out", self.out, error=err)
+        check_str("order", self.order, choices=tuple(ORDERS), error=err)
+        check_str("units", self.units, choices=("m", "cm", "mm"), error=err)
 
 
 _PALM = [MANO21.index(k) for k in ("wrist", "index1", "middle1", "pinky1", "ring1")]
@@ -70,13 +80,13 @@ def keypoints_to_trajectory(
         fps: frame rate [Hz].
         order: ``"mano21"`` or ``"openpose21"``.
     """
-    kp = np.asarray(keypoints, dtype=np.float64)
-    if kp.ndim != 3 or kp.shape[1:] != (21, 3) or kp.shape[0] == 0:
-        raise RetargetError(f"keypoints must have shape (T, 21, 3) with T >= 1, got {kp.shape}")
+    kp = check_array("keypoints", keypoints, (None, 21, 3), finite=False, error=RetargetError)
     if not np.all(np.isfinite(kp)):
         bad = int(np.argwhere(~np.isfinite(kp))[0, 0])
         raise RetargetError(f"keypoints contain NaN or inf (first at frame {bad}); fill gaps first")
-    fps = check_fps(fps, "fps")
+    fps = check_float("fps", fps, positive=True, error=RetargetError)
+    check_str("order", order, choices=tuple(ORDERS), error=RetargetError)
+    check_fps(fps, "fps")  # 1 to 10 000 Hz (dexcanvas_core.plausibility)
     if order != "mano21":
         kp = convert_keypoints(kp, order, "mano21")
     rest = HandSkeleton.default(side).rest_keypoints

@@ -11,6 +11,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from dexcanvas_core.checks import check_type
 from dexcanvas_core.objects.geometry import object_record
 from dexcanvas_core.rotations import aa_to_matrix
 from dexcanvas_core.table import table_of
@@ -192,6 +193,8 @@ def run_metrics(result: PipelineResult, cfg: RunConfig) -> dict:
     >>> m["success"], m["frames"], m["retarget_config"]["w_contacts"]
     (True, 30, 200.0)
     """
+    check_type("result", result, PipelineResult, error=RetargetError)
+    check_type("cfg", cfg, RunConfig, error=RetargetError)
     robot, sim, traj, rt = result.robot, result.sim, result.trajectory, result.retargeter
     forces = rt.cfg.force_matching.enabled
     pair = result.subject

@@ -12,7 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
+from dexcanvas_core.checks import check_path, check_type
 from dexcanvas_core.safe_io import atomic_write_text, check_output, output_lock
+from retarget.errors import RetargetError
 from retarget.pipeline import PipelineResult
 
 RUN_FILES = ("robot_trajectory.npz", "metrics.json")
@@ -66,6 +68,9 @@ def write_run(out_dir: Path, result: PipelineResult, metrics: dict) -> None:
     >>> np.load(out / "robot_trajectory.npz")["q_command"].shape
     (30, 8)
     """
+    check_path("out_dir", out_dir, error=RetargetError)
+    check_type("result", result, PipelineResult, error=RetargetError)
+    check_type("metrics", metrics, dict, error=RetargetError)
     with output_lock(out_dir, where="inside"):
         _save(out_dir, result.robot, result.sim, result.refined, result.planned_commands)
         atomic_write_text(out_dir / "metrics.json", json.dumps(metrics, indent=2, sort_keys=True))

@@ -19,6 +19,14 @@ from typing import Any, Literal
 
 import numpy as np
 
+from dexcanvas_core.checks import (
+    check_bool,
+    check_float,
+    check_int,
+    check_path,
+    check_str,
+    check_type,
+)
 from dexcanvas_core.objects.geometry import ObjectGeometry, object_geometry
 from dexcanvas_core.sim.mpc import MPCConfig
 from dexcanvas_core.sim.pipeline import SimConfig, simulate
@@ -112,6 +120,23 @@ class RunConfig:
     """Show progress bars and the summary on the terminal."""
 
     def __post_init__(self) -> None:
+        err = RetargetError
+        check_str("hand", self.hand, error=err)
+        check_str("pair", self.pair, optional=True, error=err)
+        check_path("dataset", self.dataset, optional=True, error=err)
+        check_int("index", self.index, min=0, error=err)
+        check_path("out", self.out, optional=True, error=err)
+        check_str("backend", self.backend, choices=("pinocchio", "mink"), error=err)
+        for name in ("forces", "refine", "human_replay", "progress"):
+            check_bool(name, getattr(self, name), error=err)
+        check_int("refine_retries", self.refine_retries, min=0, error=err)
+        check_int("calibrate_iterations", self.calibrate_iterations, min=0, error=err)
+        check_float("force_scale", self.force_scale, positive=True, error=err)
+        if not isinstance(self.overrides, dict):
+            raise RetargetError(
+                f"overrides must be a dict of RetargetConfig fields, got {self.overrides!r} "
+                f"({type(self.overrides).__name__})"
+            )
         object.__setattr__(self, "time_scale", check_time_scale(self.time_scale))
 
     def output_dir(self) -> Path:
@@ -293,6 +318,18 @@ def retarget_demonstration(
     >>> result.human_sim["success"], len(result.calibration.iterates)
     (True, 2)
     """
+    check_type(
+        "traj",
+        traj,
+        Trajectory,
+        hint="; load one with load_demonstration(PAIR)",
+        error=RetargetError,
+    )
+    check_type("hand", hand, (str, HandModel), error=RetargetError)
+    check_type("config", config, RetargetConfig, optional=True, error=RetargetError)
+    check_int("calibrate_iterations", calibrate_iterations, min=0, error=RetargetError)
+    check_type("refine", refine, RefineConfig, optional=True, error=RetargetError)
+    check_bool("human_replay", human_replay, error=RetargetError)
     config = RetargetConfig() if config is None else config
     subject = parse_pair(subject) if isinstance(subject, str) else subject
     hand = get_hand(hand) if isinstance(hand, str) else hand
@@ -358,6 +395,15 @@ def refine_lost(
     >>> replayed.success, replayed.ctrl.shape[0]
     (True, 20)
     """
+    check_type("result", result, PipelineResult, error=RetargetError)
+    check_type(
+        "config",
+        config,
+        RefineConfig,
+        hint="; make one with refine_config(...)",
+        error=RetargetError,
+    )
+    check_int("calibrate_iterations", calibrate_iterations, min=0, error=RetargetError)
     hand, rt, traj, robot = result.hand, result.retargeter, result.trajectory, result.robot
     task = _task(progress, "refining (MPC on the robot)", 1)
     refined = refine(hand, result.geometry, traj, robot, rt.tip_sites, config)
@@ -399,6 +445,13 @@ def retarget_config(cfg: RunConfig) -> RetargetConfig:
 
 def check_run(cfg: RunConfig) -> None:
     """Refuse option combinations that make no sense, before any work."""
+    check_type(
+        "cfg",
+        cfg,
+        RunConfig,
+        hint="; make one with RunConfig(hand=..., pair=...)",
+        error=RetargetError,
+    )
     if cfg.force_scale != 1.0 and not cfg.forces:
         raise RetargetError(
             "--force-scale scales the human forces that force matching presses with: add "

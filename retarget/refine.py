@@ -25,6 +25,7 @@ from types import SimpleNamespace
 import mujoco
 import numpy as np
 
+from dexcanvas_core.checks import check_fields
 from dexcanvas_core.sim.mj_warnings import WarningCounter
 from dexcanvas_core.sim.mpc import MPCConfig, OpenLoop, SamplingMPC, track
 from dexcanvas_core.sim.tracker import TrackingConfig, TrackingEnv
@@ -73,6 +74,9 @@ class RefineConfig:
     retry_samples: float = 1.5
     checkpoint_s: float = 0.1
     """Checkpoint spacing [s] of the backtracking (physics state, residual, plan)."""
+
+    def __post_init__(self) -> None:
+        check_fields(self, error=RetargetError)
 
 
 @dataclass

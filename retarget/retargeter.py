@@ -35,6 +35,7 @@ from collections.abc import Callable
 import mujoco
 import numpy as np
 
+from dexcanvas_core.checks import check_type
 from dexcanvas_core.keypoints import MANO21
 from dexcanvas_core.rotations import aa_to_quat_wxyz
 from dexcanvas_core.table import DEFAULT_TABLE, Table
@@ -43,6 +44,7 @@ from retarget.config import RetargetConfig
 from retarget.errors import RetargetError
 from retarget.grip import GripAssembly
 from retarget.hands.base import WRIST_SITE, wrist_qpos_from_mano
+from retarget.hands.model import HandModel
 from retarget.kinematics import MujocoKinematics, PinocchioKinematics
 from retarget.limits import (
     CollisionLimit,
@@ -100,6 +102,14 @@ class Retargeter(HumanTargets, GripAssembly, FrameSolver):
         config: RetargetConfig | None = None,
         table: Table | None = None,
     ):
+        check_type(
+            "hand",
+            hand,
+            HandModel,
+            hint="; get one with retarget.get_hand(NAME)",
+            error=RetargetError,
+        )
+        check_type("config", config, RetargetConfig, optional=True, error=RetargetError)
         self.hand = hand
         self.geometry = geometry
         self.cfg = config or RetargetConfig()

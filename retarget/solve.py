@@ -8,6 +8,7 @@ from typing import Literal
 
 import numpy as np
 
+from dexcanvas_core.checks import check_int
 from retarget._checks import check_choice, check_range
 from retarget._kernels import predicted_start
 from retarget.errors import RetargetError
@@ -46,6 +47,8 @@ class SolverConfig:
 
     def __post_init__(self):
         check_choice(self, "backend", Backend)
+        for name in ("iterations", "first_frame_iterations"):
+            check_int(f"{type(self).__name__}.{name}", getattr(self, name), error=RetargetError)
         if self.iterations < 1 or self.first_frame_iterations < 1:
             raise RetargetError(
                 f"SolverConfig.iterations and first_frame_iterations must be >= 1, got "

@@ -20,7 +20,9 @@ from pathlib import Path
 
 import torch
 
+from dexcanvas_core.checks import check_type
 from retarget.errors import RetargetError
+from retarget.hands.model import HandModel
 from retarget.urdf_export import export_urdf
 
 
@@ -42,6 +44,13 @@ class TorchHandFK:
     ):
         import pytorch_kinematics as pk
 
+        check_type(
+            "hand",
+            hand,
+            HandModel,
+            hint="; get one with retarget.get_hand(NAME)",
+            error=RetargetError,
+        )
         model = hand.compile()
         with tempfile.TemporaryDirectory() as tmp:
             exp = export_urdf(model, Path(tmp) / f"{hand.name}.urdf", couplings=False)

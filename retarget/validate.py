@@ -28,6 +28,7 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from dexcanvas_core.checks import check_fields
 from dexcanvas_core.rotations import aa_to_quat_wxyz, quat_wxyz_to_aa, rotation_angle_between_aa
 from dexcanvas_core.sim import mujoco_log  # noqa: F401 (MuJoCo's warnings to logging, not a file)
 from dexcanvas_core.sim.forces import object_contacts
@@ -114,6 +115,7 @@ class ValidateConfig:
     goes through every command."""
 
     def __post_init__(self) -> None:
+        check_fields(self, error=RetargetError)
         check_wrist_driver(self.wrist_driver)
         hz = self.wrist_smoothing_hz
         if hz is not None and not (np.isfinite(hz) and hz > 0):

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from dexcanvas_core.capture import ImportConfig, run_import
 from dexcanvas_core.capture.importer import format_names
+from dexcanvas_core.cli_help import HelpFormatter, examples_epilog
 from dexcanvas_core.errors import ValidationError
 
 
@@ -17,11 +18,17 @@ def add_import_parser(sub) -> None:
         "import",
         help="import captured sequences (MANO hand + object) into a Lance dataset",
         description=(
-            "Import captured hand-object sequences. FORMAT mano-npz: one .npz per sequence "
-            "with the keys documented in the README; published formats: see --help of FORMAT. "
-            "Object meshes and masses go to OUT.objects/manifest.toml, used by every command "
-            "that opens OUT. Example: dexcanvas import mano-npz grasp.npz --out real.lance"
+            "Import captured hand-object sequences. FORMAT mano-npz: one .npz per sequence\n"
+            "with the keys documented in the README; published formats: see --help of FORMAT.\n"
+            "Object meshes and masses go to OUT.objects/manifest.toml, used by every command\n"
+            "that opens OUT."
         ),
+        epilog=examples_epilog(
+            "dexcanvas import mano-npz grasp.npz --out real.lance",
+            "dexcanvas import mano-npz captures/ --out real.lance --objects objects.toml "
+            "--mirror-left --fps native",
+        ),
+        formatter_class=HelpFormatter,
     )
     s.add_argument("format", metavar="FORMAT", help=f"one of: {', '.join(format_names())}")
     s.add_argument("paths", nargs="+", type=Path, metavar="PATH", help="files or directories")
@@ -39,7 +46,7 @@ def add_import_parser(sub) -> None:
         help="up axis of the captures' world, overriding theirs: z, y, -y, x, ...",
     )  # fmt: skip
     s.add_argument(
-        "--fps", default="120", help="resample to this rate [Hz] (default 120), or 'native'"
+        "--fps", default="120", help="resample to this rate [Hz], or 'native' (default: 120)"
     )
     s.add_argument(
         "--density", type=float, default=None,

@@ -19,7 +19,9 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from dexcanvas_core.errors import DatasetError, DexCanvasError, ValidationError
+from dexcanvas_core.cache import cache_dir
+from dexcanvas_core.checks import check_path, check_str, check_str_seq
+from dexcanvas_core.errors import DatasetError, DexCanvasError
 from dexcanvas_core.io.decode import _child, row_to_trajectory
 from dexcanvas_core.io.schema import (
     REQUIRED_COLUMNS,
@@ -40,6 +42,18 @@ def _lance():
     import lance
 
     return lance
+
+
+def corrupt_hint(path: str | os.PathLike) -> str:
+    """How to repair a corrupt or partial dataset at ``path``: a cached built-in one is rebuilt
+    by ``dexcanvas cache rebuild``; any other is rebuilt by whatever made it, or copied again."""
+    p = Path(path).expanduser().resolve()
+    if p.is_relative_to(cache_dir().expanduser().resolve()):
+        return (
+            "it is a cached built-in dataset: run `dexcanvas cache rebuild` (the whole set) or "
+            "`dexcanvas cache rebuild --pairs OBJECT/TYPE` (one pair's cache)"
+        )
+    return "rebuild it with the command that made it, or copy it again"
 
 
 def _escape(s: str) -> str:
@@ -63,19 +77,21 @@ def build_filter(
     """A Lance SQL filter over the nested ``index`` / ``trajectory_metadata`` columns.
 
     ``manipulation_types`` match ``trajectory_metadata.gesture`` as stored; callers that accept
-    names and numeric codes pass every spelling of the same type.
+    names and numeric codes pass every spelling of the same type. Each filter is a list of
+    values (``None`` or empty: no filter); a single ``str`` is refused, not read letter by
+    letter.
+
+    Raises:
+        ValidationError: a filter that is not a list of strings (``manipulation_types``: or
+            int codes), or an ``extra`` that is not a string.
+
+    >>> build_filter(objects=["cube2"])
+    "index.scene IN ('cube2')"
     """
-    for name, values in (
-        ("manipulation_types", manipulation_types),
-        ("objects", objects),
-        ("operators", operators),
-    ):
-        if isinstance(values, (str, bytes)):
-            raise ValidationError(
-                f"{name} must be a list of names, got the string {values!r}; "
-                f"write {name}=[{values!r}]",
-                field=name,
-            )
+    manipulation_types = check_str_seq("manipulation_types", manipulation_types, codes=True)
+    objects = check_str_seq("objects", objects)
+    operators = check_str_seq("operators", operators)
+    extra = check_str("extra", extra, optional=True, empty=True)
     parts = []
     if manipulation_types:
         parts.append(_in_filter("trajectory_metadata.gesture", manipulation_types))
@@ -131,8 +147,8 @@ class LanceTrajectories:
             return fn()
         except (OSError, ValueError, RuntimeError) as e:  # lance raises these for broken files
             raise DatasetError(
-                f"cannot read: {e}. The dataset is corrupt or partially written; rebuild or "
-                "re-download it",
+                f"cannot read: {e}. The dataset is corrupt or partially written; "
+                + corrupt_hint(self.path),
                 dataset=self.path,
             ) from e
 
@@ -270,7 +286,7 @@ def open_dataset(path: str | os.PathLike) -> LanceTrajectories:
     >>> len(ds) >= 1, ds.get(0).fps
     (True, 120.0)
     """
-    p = Path(path).expanduser()
+    p = check_path("path", path).expanduser()
     name = str(p)
     if not p.exists():
         raise DatasetError(
@@ -289,8 +305,7 @@ def open_dataset(path: str | os.PathLike) -> LanceTrajectories:
         schema = ds.schema
     except (OSError, ValueError, RuntimeError) as e:
         raise DatasetError(
-            f"cannot open: {e}. The dataset is corrupt or partially written; rebuild or "
-            "re-download it",
+            f"cannot open: {e}. The dataset is corrupt or partially written; " + corrupt_hint(p),
             dataset=name,
         ) from e
     missing = [c for c in REQUIRED_COLUMNS if c not in schema.names]

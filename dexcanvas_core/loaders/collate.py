@@ -19,12 +19,14 @@ mask (all ``True`` when every sample has it). So a loss over contact forces is
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from typing import Any
 
 import torch
 from torch.utils.data import DataLoader, Dataset
 
+from dexcanvas_core.checks import check_bool, check_int
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.loaders.dataset import OPTIONAL_KEYS, REQUIRED_KEYS
 
@@ -103,8 +105,17 @@ def make_dataloader(
     >>> tuple(batch["finger_pose"].shape), tuple(batch["attention_mask"].shape)
     ((1, 736, 45), (1, 736))
     """
-    if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
-        raise ValidationError(f"batch_size must be a positive int, got {batch_size!r}")
+    if isinstance(dataset, str | os.PathLike) or dataset is None:
+        raise ValidationError(
+            f"dataset must be a dataset object, got {dataset!r}; open a path with "
+            "DexCanvasDataset(path)",
+            field="dataset",
+        )
+    check_int("batch_size", batch_size, min=1)
+    check_bool("shuffle", shuffle)
+    check_int("num_workers", num_workers, min=0)
+    if seed is not None:
+        check_int("seed", seed, min=0)
     if seed is not None and "generator" not in kwargs:
         kwargs["generator"] = torch.Generator().manual_seed(int(seed))
     if num_workers > 0:

@@ -22,7 +22,6 @@ Only the first hand and the first object are served (the common single-hand case
 from __future__ import annotations
 
 import logging
-import math
 import os
 from collections.abc import Iterator, Sequence
 from typing import Any
@@ -32,7 +31,8 @@ import torch
 from torch.utils.data import Dataset
 
 from dexcanvas_core import builtin
-from dexcanvas_core.errors import DexCanvasError, ValidationError
+from dexcanvas_core.checks import check_bool, check_float, check_int, check_path
+from dexcanvas_core.errors import DexCanvasError
 from dexcanvas_core.io import LanceTrajectories, open_dataset
 from dexcanvas_core.loaders.selection import FilterValues, Selection, select_rows
 from dexcanvas_core.taxonomy import manipulation_type
@@ -142,14 +142,14 @@ class DexCanvasDataset(Dataset):
         max_frames: int | None = None,
         validate: bool = True,
     ):
-        if fps is not None and not (math.isfinite(float(fps)) and float(fps) > 0):
-            raise ValidationError(f"fps must be a positive number [Hz], got {fps!r}", field="fps")
-        if max_frames is not None and (
-            isinstance(max_frames, bool) or not isinstance(max_frames, int) or max_frames < 1
-        ):
-            raise ValidationError(
-                f"max_frames must be a positive int or None, got {max_frames!r}", field="max_frames"
-            )
+        if fps is not None:
+            check_float("fps", fps, positive=True)
+        if max_frames is not None:
+            check_int("max_frames", max_frames, min=1)
+        check_bool("active_only", active_only)
+        check_bool("validate", validate)
+        if not isinstance(path, LanceTrajectories):
+            check_path("path", path, optional=True)
         if isinstance(path, LanceTrajectories):
             self._ds: LanceTrajectories | None = path
             self.path = path.path

@@ -27,6 +27,7 @@ import numpy as np
 
 from dexcanvas_core.builtin import builtin_demonstration_path
 from dexcanvas_core.capture.importer import use_dataset_objects
+from dexcanvas_core.checks import check_int, check_path
 from dexcanvas_core.errors import DatasetError, DexCanvasError, UnknownNameError, ValidationError
 from dexcanvas_core.io import LanceTrajectories, build_filter, open_dataset
 from dexcanvas_core.taxonomy import Pair, manipulation_type, object_spec
@@ -250,6 +251,8 @@ def load_demonstration(pair, index: int = 0, dataset=None):
     >>> traj.scene, traj.gesture, traj.fps
     ('cube2', 'tripod', 120.0)
     """
+    index = check_int("index", index, min=0)
+    dataset = check_path("dataset", dataset, optional=True)
     if dataset is None:
         pair = pair if isinstance(pair, Pair) else Pair.parse(pair)
         dataset = builtin_demonstration_path(pair)

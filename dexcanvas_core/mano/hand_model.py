@@ -40,6 +40,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from dexcanvas_core.checks import check_float
 from dexcanvas_core.keypoints import FINGERS, MANO21, MANO_JOINTS
 from dexcanvas_core.mano.limits import FINGER_JOINTS, HIGH, LOW, joint_frames
 from dexcanvas_core.mano.skeleton import HandSkeleton
@@ -310,4 +311,5 @@ def hand_model(scale: float) -> HandModel:
     >>> hand_model(1.07) is hand_model(1.07), hand_model(1.07).scale
     (True, 1.07)
     """
+    check_float("scale", scale, positive=True)
     return HandModel(HandSkeleton.default("right").scaled(scale), scale)

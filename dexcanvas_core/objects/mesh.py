@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dexcanvas_core.cache import cache_dir
+from dexcanvas_core.cache import OBJECTS_DIR, cache_dir
 from dexcanvas_core.errors import MissingDependencyError, ValidationError
 from dexcanvas_core.objects.parts import ConvexPart
 from dexcanvas_core.objects.sdf import SdfGrid
@@ -218,7 +218,7 @@ def convex_parts(mesh: ObjectMesh) -> list[ConvexPart]:
 
 def mesh_cache_dir() -> Path:
     """Where decompositions and grids are cached: ``<cache dir>/objects``."""
-    return cache_dir() / "objects"
+    return cache_dir() / OBJECTS_DIR
 
 
 def mesh_collision(mesh: ObjectMesh) -> MeshCollision:

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from dexcanvas_core.checks import check_number
 from dexcanvas_core.errors import ValidationError
 from dexcanvas_core.plausibility import check_trajectory
 from dexcanvas_core.rotations import slerp_aa
@@ -76,6 +77,7 @@ class Trajectory:
     """Further source fields (Arrow scalars) kept for a lossless write-back."""
 
     def __post_init__(self) -> None:
+        check_number("fps", self.fps)  # its range: validate()
         self.timestamp = np.asarray(self.timestamp, dtype=np.float64).reshape(-1)
         self.hands = list(self.hands)
         self.objects = list(self.objects)
