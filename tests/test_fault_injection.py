@@ -169,10 +169,11 @@ def test_run_out_below_a_file(dataset, tmp_path, no_work, capsys):
     assert (tmp_path / "file").read_text() == "keep me"
 
 
-@pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="root writes anywhere")
-def test_run_out_in_a_read_only_directory(dataset, tmp_path, no_work, capsys):
+def test_run_out_in_a_read_only_directory(dataset, tmp_path, no_work, capsys, monkeypatch):
     ro = tmp_path / "ro"
     ro.mkdir()
+    if os.geteuid() == 0:  # root writes into read-only directories: fake what a user sees
+        monkeypatch.setattr(os, "access", lambda p, mode, **kw: Path(p) != ro)
     ro.chmod(0o555)
     try:
         o = call(retarget, _run_argv(dataset, ro / "run"), capsys)
