@@ -54,8 +54,12 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--envs", type=int, default=2, help="parallel environments (default 2)")
     p.add_argument("--seed", type=int, default=0, help="PPO seed (default 0)")
     p.add_argument("--lr", type=float, default=1e-4, help="PPO learning rate (default 1e-4)")
-    p.add_argument("--log-std", type=float, default=-3.0,
-                   help="initial log std of the actions (default -3: std 0.05)")
+    p.add_argument(
+        "--log-std",
+        type=float,
+        default=-3.0,
+        help="initial log std of the actions (default -3: std 0.05)",
+    )
     args = p.parse_args(argv)
     torch.set_num_threads(1)
     kwargs = {"pair": args.pair, "hand": args.hand, "start": args.start,
