@@ -1,6 +1,9 @@
 """The Gymnasium tracking environment (retarget.gym_env): the Gymnasium checker, seeded
 determinism, vector environments, the zero action as the open-loop replay, termination."""
 
+import runpy
+from pathlib import Path
+
 import gymnasium
 import numpy as np
 import pytest
@@ -91,3 +94,12 @@ def test_retargeting_cached_once():
     assert tracking_task(**SLICE) is tracking_task(**SLICE)
     with pytest.raises(RetargetError, match="at least 2"):
         RobotTrackingEnv(**{**SLICE, "start": 10_000})
+
+
+def test_training_example_runs(capsys):
+    pytest.importorskip("stable_baselines3")
+    example = Path(__file__).parents[1] / "examples" / "train_tracking.py"
+    main = runpy.run_path(str(example))["main"]
+    main(["--start", "290", "--frames", "40", "--timesteps", "256", "--envs", "1"])
+    out = capsys.readouterr().out
+    assert "open loop (zero residual)" in out and "PPO" in out
