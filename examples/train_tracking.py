@@ -74,7 +74,7 @@ def main(argv: list[str] | None = None) -> None:
         "MlpPolicy", venv, n_steps=512, batch_size=128, n_epochs=5, learning_rate=args.lr,
         gamma=0.98, seed=args.seed, device="cpu", verbose=0,
         # a residual policy starts at the reference (SB3's action head is initialised near 0)
-        # and explores little: larger noise, smoothed by τ = 0.9, drops the object at once
+        # and explores little (std 0.14 measured: the trained policy lost the object at the lift)
         policy_kwargs={"net_arch": [64, 64], "log_std_init": args.log_std},
     )  # fmt: skip
     t0 = time.process_time()
