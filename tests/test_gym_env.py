@@ -97,7 +97,6 @@ def test_retargeting_cached_once():
 
 
 def test_training_example_runs(capsys):
-    pytest.importorskip("stable_baselines3")
     example = Path(__file__).parents[1] / "examples" / "train_tracking.py"
     main = runpy.run_path(str(example))["main"]
     main(["--start", "290", "--frames", "40", "--timesteps", "256", "--envs", "1"])
