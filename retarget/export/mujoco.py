@@ -84,6 +84,24 @@ def _mesh_file(mesh_file: str, source_spec: mujoco.MjSpec) -> Path:
     return (base / meshdir / p) if not meshdir.is_absolute() else meshdir / p
 
 
+def _freeze_inertia(spec: mujoco.MjSpec, model: mujoco.MjModel) -> None:
+    """Give every body of ``spec`` its compiled mass and inertia explicitly.
+
+    The hand's source model is compiled with its own compiler settings (``inertiafromgeom``,
+    ``balanceinertia``, ``boundmass``, …), which one exported ``<compiler>`` cannot repeat
+    for it alone; the compiled values make the scene file independent of them."""
+    for b in spec.bodies:
+        if b.name == "world":
+            continue
+        i = model.body(b.name).id
+        b.explicitinertial = True
+        b.mass = float(model.body_mass[i])
+        b.ipos = model.body_ipos[i].copy()
+        b.iquat = model.body_iquat[i].copy()
+        b.inertia = model.body_inertia[i].copy()
+        b.fullinertia = [np.nan] * 6  # unset: the diagonal ``inertia`` in ``iquat``'s frame
+
+
 def _add_keys(root: ET.Element, time: np.ndarray, qpos: np.ndarray, ctrl: np.ndarray) -> None:
     """One ``<key name="frame_t">`` per frame in ``<keyframe>``, numbers written exactly
     (``repr``: ``MjSpec.to_xml`` rounds to 6 significant digits, micrometres at the
@@ -92,35 +110,48 @@ def _add_keys(root: ET.Element, time: np.ndarray, qpos: np.ndarray, ctrl: np.nda
     if keyframe is None:
         keyframe = ET.SubElement(root, "keyframe")
 
-    def text(v: np.ndarray) -> str:
-        return " ".join(repr(float(x)) for x in v)
-
     for t in range(len(time)):
         ET.SubElement(
             keyframe,
             "key",
             name=f"frame_{t}",
             time=repr(float(time[t])),
-            qpos=text(qpos[t]),
-            ctrl=text(ctrl[t]),
+            qpos=_text(qpos[t]),
+            ctrl=_text(ctrl[t]),
         )
 
 
-def _relink_meshes(xml: str, mesh_rel: dict[str, str]) -> ET.Element:
+def _relink_meshes(xml: str, mesh_rel: dict[str, str], model: mujoco.MjModel) -> ET.Element:
     """``xml`` with each ``<mesh file=…>`` pointing at its copy (``mesh_rel``: mesh name ->
-    path relative to the scene file), and no ``meshdir``. (``MjSpec.to_xml`` compiles the
+    path relative to the scene file), no ``meshdir``, and each body's ``<inertial>`` exactly as compiled (``model``). (``MjSpec.to_xml`` compiles the
     spec, so the files can only be renamed in its text.)"""
     root = ET.fromstring(xml)
     for c in root.iter("compiler"):
         c.attrib.pop("meshdir", None)
         c.attrib.pop("assetdir", None)
+
     for mesh in root.iter("mesh"):
         if "file" in mesh.attrib:
             name = mesh.get("name")
             if name not in mesh_rel:
                 raise ExportError(f"the scene names mesh file {mesh.get('file')!r} unknown here")
             mesh.set("file", mesh_rel[name])
+    for body in root.iter("body"):
+        inertial = body.find("inertial")
+        if inertial is None:
+            continue
+        i = model.body(body.get("name")).id
+        inertial.attrib.pop("fullinertia", None)
+        inertial.set("mass", repr(float(model.body_mass[i])))
+        inertial.set("pos", _text(model.body_ipos[i]))
+        inertial.set("quat", _text(model.body_iquat[i]))
+        inertial.set("diaginertia", _text(model.body_inertia[i]))
     return root
+
+
+def _text(v: np.ndarray) -> str:
+    """Numbers as MJCF text, exactly (``repr``)."""
+    return " ".join(repr(float(x)) for x in v)
 
 
 def write_mujoco(src: ExportSource, out_dir: Path) -> list[str]:
@@ -136,6 +167,7 @@ def write_mujoco(src: ExportSource, out_dir: Path) -> list[str]:
     )
     spec.modelname = f"{src.hand}_{src.pair.replace('/', '_')}"
     model = spec.compile()
+    _freeze_inertia(spec, model)
     qpos, ctrl = scene_qpos(model, src), scene_ctrl(model, src)
     written = [SCENE_XML, TRAJECTORY_NPZ]
     source_spec = hand.loader()
@@ -158,7 +190,7 @@ def write_mujoco(src: ExportSource, out_dir: Path) -> list[str]:
     for tex in spec.textures:
         if tex.file:
             raise ExportError(f"hand {src.hand}: texture files are not exported ({tex.file})")
-    root = _relink_meshes(spec.to_xml(), mesh_rel)
+    root = _relink_meshes(spec.to_xml(), mesh_rel, model)
     _add_keys(root, src.timestamp, qpos, ctrl)
     (out_dir / SCENE_XML).write_text(ET.tostring(root, encoding="unicode"))
     with open(out_dir / TRAJECTORY_NPZ, "wb") as f:
