@@ -64,9 +64,7 @@ class ExportConfig:
 
     def validate(self) -> ExportConfig:
         if self.format not in FORMATS:
-            raise ExportError(
-                f"unknown format {self.format!r}; available: {', '.join(FORMATS)}"
-            )
+            raise ExportError(f"unknown format {self.format!r}; available: {', '.join(FORMATS)}")
         if (self.dataset is None) != (self.row is None):
             raise ExportError("--dataset and --row go together")
         return self

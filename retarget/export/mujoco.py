@@ -12,9 +12,14 @@ The directory written::
                       (T, hand_nq) the retargeted hand (its fingertip sites are tip_pos),
                       tip_sites, tip_pos (T, F, 3) [m], joint_names, fps
 
+The keys and the bodies' inertias are written exactly; the rest of the scene as
+``MjSpec.to_xml`` writes it (6 significant digits: lengths within a micrometre of the
+re-simulation's scene).
+
 Play it::
 
-    import mujoco, mujoco.viewer, numpy as np, time
+    import time
+    import mujoco, mujoco.viewer
     m = mujoco.MjModel.from_xml_path("out/scene.xml"); d = mujoco.MjData(m)
     with mujoco.viewer.launch_passive(m, d) as v:
         for k in range(m.nkey):
@@ -122,14 +127,14 @@ def _add_keys(root: ET.Element, time: np.ndarray, qpos: np.ndarray, ctrl: np.nda
 
 
 def _relink_meshes(xml: str, mesh_rel: dict[str, str], model: mujoco.MjModel) -> ET.Element:
-    """``xml`` with each ``<mesh file=…>`` pointing at its copy (``mesh_rel``: mesh name ->
-    path relative to the scene file), no ``meshdir``, and each body's ``<inertial>`` exactly as compiled (``model``). (``MjSpec.to_xml`` compiles the
-    spec, so the files can only be renamed in its text.)"""
+    """``xml`` (parsed) with each ``<mesh file=…>`` pointing at its copy (``mesh_rel``: mesh
+    name -> path relative to the scene file), no ``meshdir``, and each body's ``<inertial>``
+    exactly as compiled in ``model``. (``MjSpec.to_xml`` compiles the spec, so the files can
+    only be renamed in its text.)"""
     root = ET.fromstring(xml)
     for c in root.iter("compiler"):
         c.attrib.pop("meshdir", None)
         c.attrib.pop("assetdir", None)
-
     for mesh in root.iter("mesh"):
         if "file" in mesh.attrib:
             name = mesh.get("name")

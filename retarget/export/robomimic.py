@@ -82,9 +82,7 @@ def write_robomimic(src: ExportSource, path: Path) -> None:
     obs = observations(src)
     # next_obs: frame t+1's observation (the last frame repeats), as robomimic's converters do.
     nxt = {k: np.concatenate([v[1:], v[-1:]], axis=0) for k, v in obs.items()}
-    states = np.concatenate(
-        [src.q_sim, src.object_pos, aa_to_quat_wxyz(src.object_rot_aa)], axis=1
-    )
+    states = np.concatenate([src.q_sim, src.object_pos, aa_to_quat_wxyz(src.object_rot_aa)], axis=1)
     rewards = np.zeros(T)
     dones = np.zeros(T, dtype=np.int64)
     dones[-1] = 1
