@@ -184,6 +184,8 @@ def test_lerobot_v3_layout(source, tmp_path):
     np.testing.assert_array_equal(state, source.q_sim.astype(np.float32))
     np.testing.assert_array_equal(action, source.q_command.astype(np.float32))
     np.testing.assert_array_equal(table.column("index").to_numpy(), np.arange(FRAMES))
+    ts = table.column("timestamp").to_numpy()  # LeRobot: per episode from 0, 1/fps apart
+    assert ts[0] == 0 and np.abs(np.diff(ts) - 1 / info["fps"]).max() < 1e-4
     episodes = pq.read_table(root / "meta/episodes/chunk-000/file-000.parquet").to_pylist()
     assert len(episodes) == 1
     ep = episodes[0]

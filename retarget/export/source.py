@@ -39,7 +39,7 @@ class ExportSource:
     q_sim: np.ndarray
     """(T, nq) the re-simulated hand's joint positions."""
     timestamp: np.ndarray
-    """(T,) [s] from the first frame."""
+    """(T,) [s] from the first frame (the run's timestamps minus the first)."""
     fps: float
     """Data frame rate [Hz]."""
     object_id: str
@@ -108,6 +108,8 @@ def source_from_run(run: RunFiles) -> ExportSource:
                 f"{where}: missing array {k} (written by an older retarget run? run it again)"
             )
     T, nq = a["q"].shape
+    if T == 0:
+        raise ExportError(f"{where}: the run has no frames")
     for k in ("q_command", "q_sim"):
         if a[k].shape != (T, nq):
             raise ExportError(f"{where}: {k} has shape {a[k].shape}, q has {(T, nq)}")
@@ -122,7 +124,7 @@ def source_from_run(run: RunFiles) -> ExportSource:
         q=np.asarray(a["q"], dtype=np.float64),
         q_command=np.asarray(a["q_command"], dtype=np.float64),
         q_sim=np.asarray(a["q_sim"], dtype=np.float64),
-        timestamp=run.timestamp,
+        timestamp=run.timestamp - run.timestamp[0],
         fps=fps,
         object_id=str(obj.get("id") or str(m["pair"]).split("/", 1)[0]),
         object_pos=np.asarray(a["object_pos_sim"], dtype=np.float64),
