@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import h5py
@@ -89,8 +90,6 @@ def test_mujoco_scene_loads_with_a_key_per_frame(mujoco_dir, source):
 
 
 def _meshes(d: Path):
-    import xml.etree.ElementTree as ET
-
     return [e for e in ET.parse(d / "scene.xml").getroot().iter("mesh") if e.get("file")]
 
 

@@ -35,9 +35,10 @@ class ExportSource:
     q: np.ndarray
     """(T, nq) retargeted (kinematic) joint positions."""
     q_command: np.ndarray
-    """(T, nq) position-servo targets sent to the re-simulation (the actions)."""
+    """(T, nq) position-servo targets sent to the re-simulation (the actions). A ``--refine``
+    run's refined commands (``ctrl_refined``) are not part of the source."""
     q_sim: np.ndarray
-    """(T, nq) the re-simulated hand's joint positions."""
+    """(T, nq) the re-simulated hand's joint positions (the re-simulation of ``q_command``)."""
     timestamp: np.ndarray
     """(T,) [s] from the first frame (the run's timestamps minus the first)."""
     fps: float
