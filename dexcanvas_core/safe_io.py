@@ -23,6 +23,7 @@ import shutil
 import sys
 import tempfile
 import threading
+import uuid as uuidlib
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Literal
@@ -34,6 +35,8 @@ MIN_FREE_BYTES = 50 * 1024**2
 
 FILE_MODE = 0o644
 """Mode of files written through :func:`atomic_path` (readable by all, writable by the owner)."""
+DIR_MODE = 0o755
+"""Mode of directories written through :func:`atomic_dir` (the same, listable by all)."""
 
 LOCK_NAME = ".dexcanvas-output.lock"
 """Name of the lock file inside an output directory (:func:`output_lock`, ``where='inside'``)."""
@@ -99,6 +102,50 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
 def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` whole or not at all (:func:`atomic_path`)."""
     return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+@contextlib.contextmanager
+def atomic_dir(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a new empty temporary directory beside directory ``path``; when the block ends,
+    put it in ``path``'s place (an existing ``path`` is swapped out, then removed:
+    :func:`replace_dir`); on any exception remove it and leave ``path`` as it was.
+
+    For outputs that are a whole directory of files (an export, a Lance dataset).
+
+    >>> import tempfile
+    >>> target = Path(tempfile.mkdtemp()) / "out"
+    >>> with atomic_dir(target) as tmp:
+    ...     _ = (tmp / "a.txt").write_text("whole")
+    >>> sorted(p.name for p in target.iterdir()), sorted(p.name for p in target.parent.iterdir())
+    (['a.txt'], ['out'])
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
+    try:
+        os.chmod(tmp, DIR_MODE)
+        yield tmp
+        replace_dir(tmp, path)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    _fsync_dir(path.parent)
+
+
+def replace_dir(src: Path, dest: Path) -> None:
+    """Move directory ``src`` to ``dest``; an existing ``dest`` is swapped out first, then
+    removed (when the second rename fails, it is put back)."""
+    if not dest.exists():
+        os.replace(src, dest)
+        return
+    old = dest.with_name(f".{dest.name}.old-{uuidlib.uuid4().hex[:8]}")
+    os.replace(dest, old)
+    try:
+        os.replace(src, dest)
+    except OSError:
+        os.replace(old, dest)
+        raise
+    shutil.rmtree(old, ignore_errors=True)
 
 
 def _fsync(path: Path) -> None:

@@ -35,6 +35,7 @@ from retarget.cli_commands import (
     HandsConfig,
     RunAndSnapshotConfig,
     cmd_calibrate,
+    cmd_export,
     cmd_keypoints,
     cmd_report,
     cmd_run,
@@ -387,6 +388,40 @@ def _calibrate_config(args: argparse.Namespace):
 # ---------------------------------------------------------------------------- command table
 
 
+# ---------------------------------------------------------------------------- retarget export
+
+EXPORT_FORMATS = ("mujoco", "robomimic", "lerobot")
+"""The values of ``retarget export --format`` (``retarget.export.FORMATS``; repeated here so
+that ``retarget --help`` imports no MuJoCo, h5py or pyarrow)."""
+
+
+def _add_export_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="run directory (retarget run)")
+    p.add_argument(
+        "--format",
+        required=True,
+        choices=EXPORT_FORMATS,
+        help="mujoco: scene.xml (hand + object + table, a keyframe per frame), its meshes and "
+        "trajectory.npz; robomimic: one HDF5 file; lerobot: a LeRobot v3.0 dataset directory",
+    )
+    p.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        help="output directory (mujoco, lerobot) or .hdf5 file (robomimic)",
+    )
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+
+
+def _export_config(args: argparse.Namespace):
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
+    from retarget.export import ExportConfig
+
+    return ExportConfig(
+        run_dir=args.run_dir, format=args.format, out=args.out, overwrite=args.overwrite
+    ).validate()
+
+
 @dataclass(frozen=True)
 class Command:
     """One sub-command: its help, its arguments, how they become a config, what runs it."""
@@ -478,6 +513,21 @@ COMMANDS: dict[str, Command] = {
         add_arguments=_add_report_args,
         make_config=_report_config,
         run=cmd_report,
+    ),
+    "export": Command(
+        help="a run as a MuJoCo scene with keyframes, robomimic HDF5 or a LeRobot v3 dataset",
+        description="Write a run (retarget run) in a format robot-learning code loads "
+        "directly: a self-contained\nMuJoCo scene with one keyframe per frame, a "
+        "robomimic-style HDF5 file, or a LeRobot v3.0\ndataset (state = the re-simulated "
+        "joints q_sim, action = the servo commands q_command).",
+        examples=(
+            "retarget export runs/shadow_cube2_tripod_0 --format mujoco --out exports/mj",
+            "retarget export runs/shadow_cube2_tripod_0 --format robomimic --out demo.hdf5",
+            "retarget export runs/shadow_cube2_tripod_0 --format lerobot --out exports/lerobot",
+        ),
+        add_arguments=_add_export_args,
+        make_config=_export_config,
+        run=cmd_export,
     ),
 }
 

@@ -170,3 +170,13 @@ def cmd_calibrate(cfg) -> object:
     from retarget.calibration import run_calibrate
 
     return run_calibrate(cfg)
+
+
+def cmd_export(cfg) -> Path:
+    """``retarget export``: :func:`retarget.export.run_export`; prints the output's path."""
+    # Lazy: start-up time of ``retarget --help`` (module docstring).
+    from retarget.export import run_export
+
+    out = run_export(cfg)
+    print(f"{cfg.format} export of {cfg.run_dir}: {out}")
+    return out

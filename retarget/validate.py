@@ -122,6 +122,30 @@ class ValidateConfig:
             raise RetargetError(f"wrist_smoothing_hz must be > 0 or None, got {hz}")
 
 
+def build_sim_spec(
+    hand,
+    geometry,
+    *,
+    table: Table | None = DEFAULT_TABLE,
+    contact_timeconst: float | None = None,
+    wrist_driver: str = WRIST_DRIVERS[0],
+) -> mujoco.MjSpec:
+    """The ``mujoco.MjSpec`` of :func:`build_sim_scene` (not compiled), for writers of the scene
+    (``retarget export --format mujoco``)."""
+    spec = hand.build_spec()
+    if check_wrist_driver(wrist_driver) == "computed_torque":
+        use_wrist_motors(spec)
+    if table is not None:
+        add_table(spec, table)
+    add_object(spec, geometry, mocap=False)
+    add_object_hold(spec)
+    if contact_timeconst is not None:
+        spec.option.enableflags |= mujoco.mjtEnableBit.mjENBL_OVERRIDE
+        spec.option.o_solref = [contact_timeconst, 1.0]
+        spec.option.o_margin = 0.0
+    return spec
+
+
 def build_sim_scene(
     hand,
     geometry,
@@ -134,18 +158,13 @@ def build_sim_scene(
 
     ``wrist_driver`` ``computed_torque``: the six wrist actuators are motors
     (:func:`retarget.wrist_drive.use_wrist_motors`); ``servo``: the hand's position servos."""
-    spec = hand.build_spec()
-    if check_wrist_driver(wrist_driver) == "computed_torque":
-        use_wrist_motors(spec)
-    if table is not None:
-        add_table(spec, table)
-    add_object(spec, geometry, mocap=False)
-    add_object_hold(spec)
-    if contact_timeconst is not None:
-        spec.option.enableflags |= mujoco.mjtEnableBit.mjENBL_OVERRIDE
-        spec.option.o_solref = [contact_timeconst, 1.0]
-        spec.option.o_margin = 0.0
-    return spec.compile()
+    return build_sim_spec(
+        hand,
+        geometry,
+        table=table,
+        contact_timeconst=contact_timeconst,
+        wrist_driver=wrist_driver,
+    ).compile()
 
 
 class Resimulator:

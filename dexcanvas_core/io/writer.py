@@ -27,7 +27,7 @@ from dexcanvas_core.errors import DatasetError
 from dexcanvas_core.io.encode import schema_for, trajectories_to_batch
 from dexcanvas_core.io.reader import open_dataset
 from dexcanvas_core.io.schema import SCHEMA_VERSION, SCHEMA_VERSION_KEY
-from dexcanvas_core.safe_io import atomic_path, check_output, output_lock
+from dexcanvas_core.safe_io import atomic_path, check_output, output_lock, replace_dir
 from dexcanvas_core.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -134,7 +134,7 @@ def _write_dataset(trajectories, dest: Path, mode, schema, batch_rows, validate)
     tmp = dest.with_name(f".{dest.name}.tmp-{uuidlib.uuid4().hex[:8]}")
     try:
         _lance_write(lance, pa.RecordBatchReader.from_batches(schema, batches), tmp, "create", enc)
-        _replace_dir(tmp, dest)
+        replace_dir(tmp, dest)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
@@ -149,21 +149,6 @@ def _lance_write(lance, reader: pa.RecordBatchReader, dest: Path, mode: str, enc
         if enc.error is not None:
             raise enc.error from None
         raise DatasetError(f"writing failed: {e}", dataset=str(dest)) from e
-
-
-def _replace_dir(src: Path, dest: Path) -> None:
-    """Move ``src`` to ``dest``; an existing ``dest`` is swapped out first, then removed."""
-    if not dest.exists():
-        os.replace(src, dest)
-        return
-    old = dest.with_name(f".{dest.name}.old-{uuidlib.uuid4().hex[:8]}")
-    os.replace(dest, old)
-    try:
-        os.replace(src, dest)
-    except OSError:
-        os.replace(old, dest)
-        raise
-    shutil.rmtree(old, ignore_errors=True)
 
 
 def export_parquet(
