@@ -40,7 +40,14 @@ name is a ``RetargetConfig`` field (``--set NAME=VALUE``)."""
 
 @dataclass
 class Retargeted:
-    """A demonstration retargeted onto a hand: the pipeline's results and the run's metrics."""
+    """A demonstration retargeted onto a hand: the pipeline's results and the run's metrics
+    (what :func:`retarget` returns).
+
+    >>> from dexcanvas_core import load_demonstration
+    >>> out = retarget(load_demonstration("cube2/tripod").slice(0, 20), "panda")
+    >>> out.sim.q_sim.shape, out.metrics["frames"], out.config.hand
+    ((20, 8), 20, 'panda')
+    """
 
     result: PipelineResult
     """Everything the pipeline computed (:class:`~retarget.pipeline.PipelineResult`)."""
@@ -145,6 +152,12 @@ def retarget(
     Raises:
         RetargetError: an unknown hand or setting, a pair the hand cannot perform, human forces
             the force pipeline could not produce.
+
+    >>> from dexcanvas_core import load_demonstration
+    >>> human = load_demonstration("cube2/tripod").slice(0, 30)
+    >>> out = retarget(human, "panda", w_contacts=150.0)
+    >>> out.robot.q_command.shape, out.success, out.metrics["retarget_overrides"]
+    ((30, 8), True, {'w_contacts': 150.0})
     """
     model = hand if isinstance(hand, HandModel) else get_hand(hand)
     cfg = run_config(model.name, forces, refine, **settings)

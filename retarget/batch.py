@@ -54,7 +54,12 @@ COMMIT_SECONDS = 60.0
 
 @dataclass(frozen=True)
 class BatchConfig:
-    """``retarget batch``: which demonstrations, which hands, which method, where, on what."""
+    """``retarget batch``: which demonstrations, which hands, which method, where, on what.
+
+    >>> cfg = BatchConfig(hands=("shadow", "allegro"), out=Path("B.lance"), limit=4)
+    >>> cfg.dataset is None, cfg.ray_address is None, cfg.commit_every
+    (True, True, 8)
+    """
 
     hands: tuple[str, ...]
     """Registered hand names (``retarget hands``)."""
@@ -275,6 +280,16 @@ def run_batch(cfg: BatchConfig) -> dict:
         RetargetError: a bad option, filter, hand or setting, or an ``out`` that is not a robot
             trajectory dataset (all before any work).
         dexcanvas_core.safe_io.OutputError: ``out`` cannot be written, or another batch holds it.
+
+    >>> import tempfile
+    >>> out = Path(tempfile.mkdtemp()) / "B.lance"
+    >>> cfg = BatchConfig(hands=("panda",), out=out, rows=(0,), max_frames=30, workers=1,
+    ...                   progress=False)
+    >>> s = run_batch(cfg)
+    >>> s["jobs"], s["ran"], s["failed"], s["hands"]["panda"]["ok"]
+    (1, 1, 0, 1)
+    >>> run_batch(cfg)["skipped"]  # resumed: the finished job is not run again
+    1
     """
     out = check_output(cfg.out, overwrite=True, kind="dir", what="--out")
     if out.exists() and not cfg.overwrite:

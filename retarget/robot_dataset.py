@@ -184,6 +184,16 @@ def read_robot_rows(
         filter: a Lance SQL filter, e.g. ``"hand = 'allegro'"``.
         columns: only these columns (default all).
         status: only rows of this status (``"ok"`` or ``"failed"``).
+
+    >>> import tempfile
+    >>> path = Path(tempfile.mkdtemp()) / "R.lance"
+    >>> create_empty(path)
+    >>> row = {"uuid": "u1", "hand": "panda", "method": method_key(False, False, {}, None),
+    ...        "status": "ok", "q": np.zeros((3, 8)), "joint_names": [f"j{i}" for i in range(8)]}
+    >>> upsert_rows(path, [row])
+    1
+    >>> [(r["hand"], r["q"].shape, r["method"]["forces"]) for r in read_robot_rows(path)]
+    [('panda', (3, 8), False)]
     """
     import lance  # heavy; only where a dataset is opened
 
