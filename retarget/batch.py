@@ -17,7 +17,6 @@ import functools
 import hashlib
 import json
 import logging
-import os
 import time
 import traceback
 from collections.abc import Iterator
@@ -32,6 +31,7 @@ from dexcanvas_core.checks import check_bool, check_int, check_str
 from dexcanvas_core.errors import DexCanvasError
 from dexcanvas_core.io import open_dataset
 from dexcanvas_core.loaders.selection import load_row, select_rows
+from dexcanvas_core.parallel import map_unordered
 from dexcanvas_core.safe_io import check_output, output_lock
 from retarget.api import retarget_with, run_config
 from retarget.batch_report import job_progress, print_summary
@@ -330,67 +330,21 @@ def _drive(cfg: BatchConfig, out: Path, todo: list, advance) -> None:
 
 
 def execute(jobs: list[Job], workers: int | None, ray_address: str | None) -> Iterator[dict]:
-    """The rows of ``jobs`` in the order they finish: a local spawn process pool, or Ray."""
-    if not jobs:
-        return
-    if ray_address is not None:
-        yield from _execute_ray(jobs, workers, ray_address)
-        return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    n = min(workers or os.cpu_count() or 1, len(jobs))
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=n, mp_context=ctx) as pool:
-        futures = {pool.submit(run_job, j): j for j in jobs}
-        try:
-            for fut in as_completed(futures):
-                yield _row_or_failure(fut.result, futures[fut])
-        finally:
-            for fut in futures:
-                fut.cancel()
-
-
-def _execute_ray(jobs: list[Job], workers: int | None, address: str) -> Iterator[dict]:
-    import ray  # optional dependency (the ``distributed`` extra)
-
-    started = not ray.is_initialized()
-    if started and address == "local":
-        ray.init(
-            num_cpus=workers,
-            include_dashboard=False,
-            log_to_driver=False,
-            _node_ip_address="127.0.0.1",
-        )
-    elif started:
-        ray.init(address=address, log_to_driver=False)
-    try:
-        task = ray.remote(num_cpus=1, max_retries=0)(run_job)
-        refs = {task.remote(j): j for j in jobs}
-        pending = list(refs)
-        while pending:
-            done, pending = ray.wait(pending, num_returns=1)
-            ref = done[0]
-            yield _row_or_failure(lambda ref=ref: ray.get(ref), refs[ref])
-    finally:
-        if started:
-            ray.shutdown()
-
-
-def _row_or_failure(get, job: Job) -> dict:
-    """A finished job's row, or a failed row when its worker died (``get`` raised)."""
-    try:
-        return get()
-    except Exception as e:  # a lost worker fails its job, not the batch
-        return {
-            "uuid": job.uuid,
-            "source_row": job.source_row,
-            "pair": job.pair,
-            "hand": job.hand,
-            "method": job.method,
-            "status": "failed",
-            "reason": f"worker lost: {type(e).__name__}: {e}",
-        }
+    """The rows of ``jobs`` in the order they finish, on a local spawn process pool or Ray
+    (:func:`dexcanvas_core.parallel.map_unordered`); a job whose worker died gives a failed row."""
+    for job, row, error in map_unordered(run_job, jobs, workers=workers, ray_address=ray_address):
+        if error is None:
+            yield row
+        else:
+            yield {
+                "uuid": job.uuid,
+                "source_row": job.source_row,
+                "pair": job.pair,
+                "hand": job.hand,
+                "method": job.method,
+                "status": "failed",
+                "reason": f"worker lost: {type(error).__name__}: {error}",
+            }
 
 
 def summarize(out: Path, jobs: list[Job], ran: int, seconds: float) -> dict:
