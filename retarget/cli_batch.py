@@ -55,20 +55,20 @@ def add_batch_args(p: argparse.ArgumentParser) -> None:
     src.add_argument(
         "--types",
         type=_names,
-        default=(),
+        default=None,
         metavar="T[,T...]",
         help="only these manipulation types (names or gesture codes)",
     )
     src.add_argument(
-        "--objects", type=_names, default=(), metavar="O[,O...]", help="only these objects"
+        "--objects", type=_names, default=None, metavar="O[,O...]", help="only these objects"
     )
     src.add_argument(
-        "--operators", type=_names, default=(), metavar="OP[,OP...]", help="only these operators"
+        "--operators", type=_names, default=None, metavar="OP[,OP...]", help="only these operators"
     )
     src.add_argument(
         "--rows",
         type=_rows,
-        default=(),
+        default=None,
         metavar="R[,R-R...]",
         help="only these 0-based row positions, e.g. 0,3,5-7",
     )
@@ -152,10 +152,10 @@ def batch_config(args: argparse.Namespace):
         hands=args.hands,
         out=args.out,
         dataset=None if args.dataset in (None, BUILTIN) else args.dataset,
-        types=args.types,
-        objects=args.objects,
-        operators=args.operators,
-        rows=args.rows,
+        types=args.types or (),
+        objects=args.objects or (),
+        operators=args.operators or (),
+        rows=args.rows or (),
         limit=args.limit,
         max_frames=args.max_frames,
         forces=args.forces,
