@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
@@ -61,15 +62,18 @@ def _ray(fn, jobs, workers: int | None, address: str):
     import ray  # optional dependency (the ``distributed`` extra)
 
     started = not ray.is_initialized()
-    if started and address == LOCAL_RAY:
-        ray.init(
-            num_cpus=workers,
-            include_dashboard=False,
-            log_to_driver=False,
-            _node_ip_address="127.0.0.1",
-        )
-    elif started:
-        ray.init(address=address, log_to_driver=False)
+    with warnings.catch_warnings():
+        # Ray starts its processes by fork + exec: nothing of Lance runs in the child
+        warnings.filterwarnings("ignore", message="lance is not fork-safe")
+        if started and address == LOCAL_RAY:
+            ray.init(
+                num_cpus=workers,
+                include_dashboard=False,
+                log_to_driver=False,
+                _node_ip_address="127.0.0.1",
+            )
+        elif started:
+            ray.init(address=address, log_to_driver=False)
     try:
         task = ray.remote(num_cpus=1, max_retries=0)(fn)
         refs = {task.remote(job): job for job in jobs}
