@@ -360,6 +360,7 @@ def run_synthesize_command(args: argparse.Namespace) -> dict:
             expand=args.expand,
             seed=args.seed,
             workers=args.workers,
+            ray_address=args.ray_address,
             sim=_sim_config(args),
             limit=args.limit,
             overwrite=args.overwrite,
@@ -538,6 +539,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--expand", type=int, default=10, help="rollouts per source row")
     s.add_argument("--out", type=Path, required=True, help="output dataset directory (*.lance)")
     s.add_argument("--workers", type=int, default=1, help="processes")
+    s.add_argument("--ray-address", default=None, metavar="auto|HOST:PORT|local",
+                   help="run the source rows as Ray tasks on that cluster ('local': a private "
+                   "local Ray on 127.0.0.1; default: local processes)")  # fmt: skip
     s.add_argument("--limit", type=int, default=None,
                    help="only the first N source rows (default: all)")  # fmt: skip
     add_allow_implausible(s)

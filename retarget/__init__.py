@@ -19,6 +19,12 @@ One demonstration end to end, in memory (``retarget run`` adds the files and the
 >>> result = retarget.retarget_demonstration(human, "cube2/tripod", "shadow")
 >>> result.robot.q_command.shape[0], result.sim.success
 (30, True)
+
+The same with the run's metrics (what ``retarget run`` writes to ``metrics.json``):
+
+>>> out = retarget.retarget(human, "allegro")
+>>> out.robot.q_command.shape, out.sim.success, out.metrics["keypoint_err_mean_m"] < 0.05
+((30, 22), True, True)
 """
 
 from __future__ import annotations
@@ -52,6 +58,11 @@ _EXPORTS = {
     "PipelineResult": "retarget.pipeline",
     "retarget_demonstration": "retarget.pipeline",
     "run_pipeline": "retarget.pipeline",
+    "retarget": "retarget.api",
+    "Retargeted": "retarget.api",
+    "run_batch": "retarget.batch",
+    "BatchConfig": "retarget.batch",
+    "read_robot_rows": "retarget.robot_dataset",
     "run_retarget": "retarget.run",
     "run_metrics": "retarget.metrics",
     "force_metrics": "retarget.metrics",

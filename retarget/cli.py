@@ -31,6 +31,15 @@ from dexcanvas_core.exits import EXIT_FAILED, EXIT_OK, run_command
 from dexcanvas_core.objects.options import add_object_options, use_object_options
 from dexcanvas_core.plausibility import add_allow_implausible, allowing_implausible, check_fps
 from retarget import __version__
+from retarget.cli_batch import (
+    BATCH_DESCRIPTION,
+    BATCH_EXAMPLES,
+    BATCH_HELP,
+    add_batch_args,
+    batch_config,
+    batch_exit_code,
+    run_batch_command,
+)
 from retarget.cli_commands import (
     HandsConfig,
     RunAndSnapshotConfig,
@@ -453,6 +462,15 @@ COMMANDS: dict[str, Command] = {
         make_config=_run_config,
         run=cmd_run,
         exit_code=lambda m: EXIT_OK if m["success"] or m.get("success_refined") else EXIT_FAILED,
+    ),
+    "batch": Command(
+        help=BATCH_HELP,
+        description=BATCH_DESCRIPTION,
+        examples=BATCH_EXAMPLES,
+        add_arguments=add_batch_args,
+        make_config=batch_config,
+        run=run_batch_command,
+        exit_code=batch_exit_code,
     ),
     "hands": Command(
         help="list the robot hands: DoF, actuators, finger mapping, model source",

@@ -472,3 +472,24 @@ def test_reference_lowpass_removes_fit_noise_and_keeps_scripted_motion(demo):
         lowpass_reference(ref, 90.0)  # above Nyquist at 120 Hz
     with pytest.raises(ValidationError, match="reference_lowpass_hz"):
         SimConfig(reference_lowpass_hz=-1.0).validate()
+
+
+@pytest.mark.filterwarnings("ignore:lance is not fork-safe")  # Ray forks, then execs
+def test_synthesize_on_local_ray_equals_in_process(tmp_path, demo):
+    """``dexcanvas synthesize --ray-address local``: the same rollouts as without Ray."""
+    pytest.importorskip("ray")
+    src = tmp_path / "src.lance"
+    write_dataset([demo.slice(150, 300)], src)
+    base = ["synthesize", "--dataset", str(src), "--expand", "1", "--tracker", "open_loop",
+            "--seed", "7", "--size", "0.05", "--mass", "0.05", "--friction", "0.05",
+            "--hand-scale", "0.01", "--object-offset", "0",
+            "--object-offset-yaw-deg", "0"]  # fmt: skip
+    assert dexcanvas_main([*base, "--out", str(tmp_path / "a.lance")]) == 0
+    ray_args = [*base, "--out", str(tmp_path / "b.lance"), "--ray-address", "local"]
+    assert dexcanvas_main(ray_args) == 0
+    a = list(open_dataset(tmp_path / "a.lance").iter_trajectories())
+    b = list(open_dataset(tmp_path / "b.lance").iter_trajectories())
+    assert [t.uuid for t in a] == [t.uuid for t in b] and a
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x.object.pos, y.object.pos)
+        np.testing.assert_array_equal(x.hand.joint_pos, y.hand.joint_pos)

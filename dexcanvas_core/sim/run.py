@@ -24,6 +24,7 @@ import numpy as np
 from dexcanvas_core.errors import DatasetError, MissingDependencyError, UnknownNameError
 from dexcanvas_core.io import open_dataset, write_dataset
 from dexcanvas_core.loaders.selection import load_demonstration, load_row, subject_of
+from dexcanvas_core.parallel import map_unordered
 from dexcanvas_core.safe_io import atomic_write_text, check_output, output_lock
 from dexcanvas_core.sim.mj_warnings import blew_up, describe
 from dexcanvas_core.sim.pipeline import SimConfig, simulate
@@ -157,6 +158,10 @@ class SynthesizeConfig:
     expand: int = 10
     seed: int = 0
     workers: int = 1
+    ray_address: str | None = None
+    """``None``: ``workers`` local processes; ``auto``, ``HOST:PORT``: the source rows as Ray
+    tasks on that cluster; ``local``: a private local Ray
+    (:func:`dexcanvas_core.parallel.map_unordered`)."""
     sim: SimConfig = field(default_factory=SimConfig)
     limit: int | None = None
     """Only the first ``limit`` source rows (for trials)."""
@@ -252,7 +257,14 @@ def _synthesize(cfg: SynthesizeConfig, out: Path) -> dict:
             total=len(positions),
             completed=len(positions) - len(todo),
         )
-        if cfg.workers > 1 and len(jobs) > 1:
+        if cfg.ray_address is not None:
+            for _, _, error in map_unordered(
+                _synth_row, jobs, workers=cfg.workers, ray_address=cfg.ray_address
+            ):
+                if error is not None:
+                    raise error
+                bar.advance(task)
+        elif cfg.workers > 1 and len(jobs) > 1:
             with ProcessPoolExecutor(cfg.workers) as pool:
                 for _ in pool.map(_synth_row, jobs):
                     bar.advance(task)
