@@ -310,7 +310,7 @@ def calibrate_forces(
 
     >>> from dexcanvas_core import load_demonstration, object_geometry
     >>> from retarget import Resimulator, Retargeter, RetargetConfig, ValidateConfig, get_hand
-    >>> from retarget.pipeline import human_forces
+    >>> from retarget.human_forces import human_forces
     >>> human, _ = human_forces(load_demonstration("cube2/tripod").slice(230, 330), "cube2")
     >>> hand, obj = get_hand("allegro"), object_geometry("cube2")
     >>> rt = Retargeter(hand, obj, RetargetConfig.from_overrides({"force_matching": True}))

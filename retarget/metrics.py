@@ -18,7 +18,8 @@ from dexcanvas_core.table import table_of
 from dexcanvas_core.trajectory import FORCE_GROUPS
 from retarget.errors import RetargetError
 from retarget.force_scores import correlation_means, finger_force_profiles, profile_band_frames
-from retarget.pipeline import HUMAN_REPLAY_SEED, PipelineResult, RunConfig
+from retarget.human_forces import HUMAN_REPLAY_SEED
+from retarget.pipeline import PipelineResult, RunConfig
 
 CONTACT_OFF_TARGET_M = 0.01
 """A finger whose contacting link stays farther than this [m] from the human's contact point

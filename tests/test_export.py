@@ -20,6 +20,7 @@ from dexcanvas_core.exits import EXIT_OK
 from dexcanvas_core.io import write_dataset
 from dexcanvas_core.rotations import aa_to_quat_wxyz
 from dexcanvas_core.safe_io import OutputExistsError
+from retarget.batch import BatchConfig, run_batch
 from retarget.cli import EXPORT_FORMATS, main
 from retarget.export import FORMATS, ExportError, export, load_export_source
 from retarget.hands import get_hand
@@ -28,11 +29,17 @@ FRAMES = 60
 
 
 @pytest.fixture(scope="session")
-def run_dir(tmp_path_factory) -> Path:
-    """A ``retarget run`` directory: panda on the first 60 frames of the built-in
-    cube2/tripod demonstration."""
+def clip(tmp_path_factory) -> Path:
+    """The first 60 frames of the built-in cube2/tripod demonstration, as a dataset."""
     data = tmp_path_factory.mktemp("export_data") / "clip.lance"
     write_dataset([load_demonstration("cube2/tripod").slice(0, FRAMES)], data)
+    return data
+
+
+@pytest.fixture(scope="session")
+def run_dir(clip, tmp_path_factory) -> Path:
+    """A ``retarget run`` directory: panda on ``clip``."""
+    data = clip
     out = tmp_path_factory.mktemp("export_run") / "run"
     argv = ["run", "--hand", "panda", "--pair", "cube2/tripod", "--dataset", str(data)]
     assert main([*argv, "--out", str(out), "--quiet"]) == EXIT_OK
@@ -57,8 +64,50 @@ def test_source_errors(tmp_path):
         load_export_source(tmp_path / "nothing")
     with pytest.raises(ExportError, match="exactly one"):
         load_export_source()
-    with pytest.raises(ExportError, match="not supported"):
-        load_export_source(dataset=tmp_path / "b.lance", row=0)
+    with pytest.raises(ExportError, match="exactly one"):
+        load_export_source(tmp_path, dataset=tmp_path / "b.lance", row=0)
+
+
+@pytest.fixture(scope="session")
+def batch_dataset(clip, tmp_path_factory) -> Path:
+    """A ``retarget batch`` robot dataset of the same clip and hand as ``run_dir``."""
+    out = tmp_path_factory.mktemp("export_batch") / "B.lance"
+    summary = run_batch(BatchConfig(hands=("panda",), out=out, dataset=clip, progress=False))
+    assert summary["ran"] == 1 and summary["failed"] == 0
+    return out
+
+
+@pytest.fixture(scope="session")
+def batch_source(batch_dataset):
+    return load_export_source(dataset=batch_dataset, row=0)
+
+
+def test_robot_dataset_row_is_the_same_source_as_the_run(batch_source, source, batch_dataset):
+    """``retarget batch`` and ``retarget run`` of one clip: the export sources agree."""
+    for name in ("q", "q_command", "q_sim", "object_pos", "object_rot_aa", "tip_pos",
+                 "finger_force", "timestamp"):  # fmt: skip
+        np.testing.assert_array_equal(getattr(batch_source, name), getattr(source, name), name)
+    assert (batch_source.hand, batch_source.joint_names, batch_source.object_id) == (
+        source.hand, source.joint_names, source.object_id,
+    )  # fmt: skip
+    with pytest.raises(ExportError, match="rows"):
+        load_export_source(dataset=batch_dataset, row=5)
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_robot_dataset_row_exports_to_every_format(fmt, batch_source, tmp_path):
+    out = export(batch_source, fmt, tmp_path / f"row.{'hdf5' if fmt == 'robomimic' else 'd'}")
+    if fmt == "mujoco":
+        m = mujoco.MjModel.from_xml_path(str(out / "scene.xml"))
+        assert m.nkey == FRAMES
+        np.testing.assert_array_equal(m.key_qpos[:, : len(batch_source.joint_names)],
+                                      batch_source.q_sim)  # fmt: skip
+    elif fmt == "robomimic":
+        with h5py.File(out, "r") as f:
+            np.testing.assert_array_equal(f["data/demo_0/actions"][()], batch_source.q_command)
+    else:
+        t = pq.read_table(next((out / "data").rglob("*.parquet")))
+        assert t.num_rows == FRAMES
 
 
 # ---------------------------------------------------------------------------- mujoco

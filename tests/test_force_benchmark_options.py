@@ -13,7 +13,7 @@ from benchmarks.force_preservation import aggregate, cache, cli, config, jobs, p
 from dexcanvas_core.example import example_trajectories
 from dexcanvas_core.sim.pipeline import SimConfig, simulate
 from dexcanvas_core.trajectory import Contacts, HandTrack, ObjectMove, ObjectTrack, Trajectory
-from retarget.pipeline import HUMAN_REPLAY_SEED, human_sim_config
+from retarget.human_forces import HUMAN_REPLAY_SEED, human_sim_config
 
 
 @pytest.fixture(scope="module")

@@ -944,7 +944,7 @@ def test_cli_human_replay_scores_the_human_forces_against_themselves(
 
     from dexcanvas_core.io import write_dataset
     from retarget.cli import main
-    from retarget.pipeline import HUMAN_REPLAY_SEED
+    from retarget.human_forces import HUMAN_REPLAY_SEED
 
     src = tmp_path / "h.lance"
     write_dataset([human_with_forces.slice(250, 370)], src)

@@ -33,7 +33,7 @@ from benchmarks._common import atomic_write_json
 from dexcanvas_core.safe_io import atomic_write_bytes
 from dexcanvas_core.table import Table
 from dexcanvas_core.trajectory import Contacts, HandTrack, ObjectMove, ObjectTrack, Trajectory
-from retarget.pipeline import human_sim_config
+from retarget.human_forces import human_sim_config
 
 CLASSES = {c.__name__: c for c in (Trajectory, HandTrack, ObjectTrack, ObjectMove, Contacts, Table)}
 """The dataclasses a cached trajectory may hold, by name."""

@@ -64,7 +64,7 @@ from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S
 from dexcanvas_core.taxonomy import GROUPS
 from retarget.config import RetargetConfig
 from retarget.hands import available_hands, get_hand
-from retarget.pipeline import HUMAN_REPLAY_SEED
+from retarget.human_forces import HUMAN_REPLAY_SEED
 from retarget.refine import RefineConfig
 
 

@@ -39,15 +39,9 @@ from retarget.baselines import (
 from retarget.config import RetargetConfig
 from retarget.errors import RetargetError
 from retarget.hands import get_hand
+from retarget.human_forces import HUMAN_REPLAY_SEED, human_sim_config
 from retarget.metrics import force_metrics, refined_force_metrics
-from retarget.pipeline import (
-    HUMAN_REPLAY_SEED,
-    check_pair,
-    human_sim_config,
-    refine_config,
-    refine_lost,
-    retarget_demonstration,
-)
+from retarget.pipeline import check_pair, refine_config, refine_lost, retarget_demonstration
 from retarget.retargeter import Retargeter
 from retarget.validate import Resimulator
 

@@ -15,7 +15,7 @@ from benchmarks.force_preservation.config import (
     VARIANTS,
 )
 from dexcanvas_core.safe_io import atomic_path
-from retarget.pipeline import HUMAN_REPLAY_SEED
+from retarget.human_forces import HUMAN_REPLAY_SEED
 
 
 def plot_success(

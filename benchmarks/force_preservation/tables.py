@@ -13,7 +13,7 @@ from benchmarks.force_preservation.aggregate import WRENCH_FEASIBLE
 from benchmarks.force_preservation.config import LABELS, NOT_IMPLEMENTED, VARIANTS
 from dexcanvas_core.sim.signal import CAPTURE_SMOOTH_S
 from retarget.force_scores import LOAD_BEARING_SHARE
-from retarget.pipeline import HUMAN_REPLAY_SEED
+from retarget.human_forces import HUMAN_REPLAY_SEED
 from retarget.validate import FORCE_CONTACT_TIMECONST
 
 

@@ -4,7 +4,8 @@
 :mod:`retarget.export.robomimic`, :mod:`retarget.export.lerobot`) reads. A source is a run
 directory (``retarget run``: ``robot_trajectory.npz`` and ``metrics.json``, read with the checks
 of :func:`retarget.viz.data.load_run`); a row of a robot dataset becomes one through another
-adapter beside :func:`source_from_run`, chosen by :func:`load_export_source`.
+adapter, :func:`source_from_robot_row` (``retarget batch``'s Lance dataset,
+:mod:`retarget.robot_dataset`), chosen by :func:`load_export_source`.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 
 from dexcanvas_core.table import DEFAULT_TABLE, Table
 from retarget.errors import RetargetError
+from retarget.robot_dataset import read_robot_rows
 from retarget.viz.data import RunFiles, load_run
 from retarget.viz.errors import VizError
 
@@ -82,16 +84,13 @@ def load_export_source(
     ``row`` (a robot dataset of ``retarget batch``); exactly one of the two.
 
     Raises:
-        ExportError: neither or both given, a malformed run directory, or a robot dataset
-            (not readable by this version).
+        ExportError: neither or both given, a malformed run directory, a row that is not
+            in the robot dataset or that failed.
     """
     if (run_dir is None) == (dataset is None):
         raise ExportError("give a run directory or --dataset with --row (exactly one)")
     if dataset is not None:
-        raise ExportError(
-            f"--dataset {dataset}: exporting rows of a robot dataset is not supported by this "
-            "version; export a run directory (retarget run --out DIR)"
-        )
+        return source_from_robot_row(dataset, 0 if row is None else row)
     try:
         run = load_run(run_dir)
     except VizError as e:
@@ -134,6 +133,51 @@ def source_from_run(run: RunFiles) -> ExportSource:
         tip_pos=np.asarray(a["tip_pos_world"], dtype=np.float64),
         force_parts=[str(p) for p in a["force_parts"]],
         finger_force=np.asarray(a["finger_force_world"], dtype=np.float64),
+        table=table,
+        metrics=m,
+    )
+
+
+def source_from_robot_row(dataset: str | Path, row: int) -> ExportSource:
+    """An :class:`ExportSource` of row ``row`` (0-based, dataset order) of a robot dataset
+    written by ``retarget batch`` (:func:`retarget.robot_dataset.read_robot_rows`).
+
+    Raises:
+        ExportError: no such row, or the row's job failed (it has no trajectory).
+    """
+    if isinstance(row, bool) or not isinstance(row, int | np.integer) or row < 0:
+        raise ExportError(f"--row must be an int >= 0, got {row!r}")
+    try:
+        rows = read_robot_rows(dataset)
+    except RetargetError as e:
+        raise ExportError(str(e)) from e
+    if row >= len(rows):
+        raise ExportError(f"{dataset} has {len(rows)} rows; --row {row} is not one of them")
+    r = rows[row]  # arrays are copied below: Arrow's buffers are read-only
+    if r["status"] != "ok":
+        raise ExportError(
+            f"{dataset} row {row} ({r['pair']}, {r['hand']}) failed in the batch: {r['reason']}; "
+            "it has no trajectory to export (rerun it with retarget batch --retry-failed)"
+        )
+    m = dict(r["metrics"])
+    obj = m.get("object") or {}
+    table = Table.from_dict(m["table"]) if isinstance(m.get("table"), dict) else DEFAULT_TABLE
+    ts = np.array(r["timestamp"], dtype=np.float64)
+    return ExportSource(
+        hand=str(r["hand"]),
+        joint_names=[str(n) for n in r["joint_names"]],
+        q=np.array(r["q"], dtype=np.float64),
+        q_command=np.array(r["q_command"], dtype=np.float64),
+        q_sim=np.array(r["q_sim"], dtype=np.float64),
+        timestamp=ts - ts[0],
+        fps=float(r["fps"]),
+        object_id=str(obj.get("id") or str(r["pair"]).split("/", 1)[0]),
+        object_pos=np.array(r["object_pos_sim"], dtype=np.float64),
+        object_rot_aa=np.array(r["object_rot_sim"], dtype=np.float64),
+        tip_sites=[str(s) for s in r["tip_sites"]],
+        tip_pos=np.array(r["tip_pos_world"], dtype=np.float64),
+        force_parts=[str(p) for p in r["force_parts"]],
+        finger_force=np.array(r["finger_force_world"], dtype=np.float64),
         table=table,
         metrics=m,
     )
