@@ -89,6 +89,8 @@ def test_projection_arithmetic(rows):
     assert v["wall_hours"]["64"] == pytest.approx(no_f / (64 * 0.5) / 3600)
     assert v["met"] == (v["wall_hours"]["64"] <= 1.0)
     assert v["cores_for_target"] == pytest.approx(no_f / (3600 * 0.5))
+    assert v["wall_hours_on_64_perfect"] == pytest.approx(no_f / 64 / 3600)
+    assert v["cores_for_target_perfect"] == pytest.approx(no_f / 3600)
     f = demo_s * 4.0 + demo_s * sr.RELEASE_HANDS * (0.6 + 2.0)  # human once + hand stages
     assert p["variants"]["forces"]["cpu_hours"] == pytest.approx(f / 3600)
     f2 = demo_s * 4.0 + demo_s * sr.RELEASE_HANDS * (0.6 + 2 * 0.4)
