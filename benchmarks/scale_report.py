@@ -85,6 +85,12 @@ def throughput(rows: list[dict]) -> dict:
     return out
 
 
+def cpu_share(batch: dict) -> float:
+    """The cores a batch's workers got: their jobs' CPU seconds / (wall × workers); below 1 the
+    machine's other load, not the code, limited the speedup."""
+    return sum(j["cpu_s"] for j in batch["jobs"]) / (batch["wall_s"] * batch["workers"])
+
+
 def scaling_summary(batches: list[dict]) -> dict:
     """Speedups against one worker per engine, 2-worker efficiency, and Ray's overhead per task
     ((Ray wall − pool wall) / tasks at the same worker count) and as a share of the mean task
@@ -203,7 +209,7 @@ def tables(doc: dict) -> list[Table]:
             num(v["cpu_s_per_demo_s"], fmt=".2f"),
         )
     t2 = Table(title="Scaling (retarget + re-simulate jobs)")
-    for c in ("engine", "workers", "jobs", "start [s]", "wall [s]", "speedup", "load"):
+    for c in ("engine", "workers", "jobs", "start [s]", "wall [s]", "speedup", "CPU share", "load"):
         t2.add_column(c, justify="right")
     sp = doc["scaling"]["speedup"]
     for b in doc["batches"]:
@@ -214,6 +220,7 @@ def tables(doc: dict) -> list[Table]:
             num(b["start_s"], fmt=".1f"),
             num(b["wall_s"], fmt=".1f"),
             num(sp.get(f"{b['engine']} {b['workers']}")),
+            num(cpu_share(b)),
             " ".join(f"{x:.2f}" for x in b["load"]),
         )
     t3 = Table(title="Projection: 70 h × 7 hands")
@@ -267,14 +274,14 @@ def render_page(doc: dict, source: Path) -> str:
         "",
         "## Scaling (retarget + re-simulate, no forces)",
         "",
-        "| engine | workers | jobs | start [s] | wall [s] | speedup | load at start |",
-        "|---|---:|---:|---:|---:|---:|---|",
+        "| engine | workers | jobs | start [s] | wall [s] | speedup | CPU share | load at start |",
+        "|---|---:|---:|---:|---:|---:|---:|---|",
     ]
     for b in doc["batches"]:
         out.append(
             f"| {b['engine']} | {b['workers']} | {len(b['jobs'])} | {b['start_s']:.1f} | "
             f"{b['wall_s']:.1f} | {num(s['speedup'].get(b['engine'] + ' ' + str(b['workers'])))} "
-            f"| {_loads(b['load'])} |"
+            f"| {cpu_share(b):.2f} | {_loads(b['load'])} |"
         )
     for w, o in s["ray_overhead"].items():
         out.append(
@@ -303,7 +310,8 @@ def render_page(doc: dict, source: Path) -> str:
         "",
         f"Hours on N cores at the measured 2-worker efficiency ({p['efficiency']:.2f}); "
         "*perfect*: at efficiency 1 (the CPU hours / N, plus Ray's overhead) — the bound no "
-        "scheduling can beat.",
+        "scheduling can beat. *CPU share*: the jobs' CPU seconds / (wall × workers), the cores "
+        "the workers actually got on this shared machine.",
     ]
     out += [
         "",

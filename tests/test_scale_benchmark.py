@@ -76,6 +76,8 @@ def test_scaling_summary_speedup_efficiency_and_ray_overhead():
     assert o["per_task_s"] == pytest.approx(0.1)
     assert o["share_of_task"] == pytest.approx(0.1)
     assert o["noop_share_of_task"] == pytest.approx(0.002)
+    b = {**_batch("pool", 2, 2.5), "jobs": [{"wall_s": 1.0, "cpu_s": 0.5}] * 4}
+    assert sr.cpu_share(b) == pytest.approx(2.0 / 5.0)
 
 
 def test_projection_arithmetic(rows):
