@@ -244,11 +244,11 @@ def ray_batch(jobs: list[tuple], workers: int, cfg) -> dict:
     time, the jobs' rows, and a no-op task's mean round trip."""
     import ray  # the distributed extra: only this part needs it
 
-    env = {"PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    saved = os.environ.get("PYTHONPATH")
+    path = os.pathsep.join(p for p in (str(ROOT), saved) if p)  # the workers import this checkout
     t0 = time.perf_counter()
     with one_thread_env(), tempfile.TemporaryDirectory(prefix="rs", dir="/tmp") as tmp:
-        saved = os.environ.get("PYTHONPATH")
-        os.environ.update(env)
+        os.environ["PYTHONPATH"] = path  # Ray's processes inherit the driver's environment
         try:
             ray.init(
                 address="local",
@@ -260,7 +260,10 @@ def ray_batch(jobs: list[tuple], workers: int, cfg) -> dict:
                 logging_level="ERROR",
             )
         finally:
-            os.environ["PYTHONPATH"] = saved if saved is not None else ""
+            if saved is None:
+                os.environ.pop("PYTHONPATH")
+            else:
+                os.environ["PYTHONPATH"] = saved
         try:
             rjob, rnoop, rwarm = (ray.remote(num_cpus=1)(f) for f in (job, noop, warm))
             ray.get([rwarm.remote(cfg.hands, jobs[0][0], cfg.start) for _ in range(workers)])
