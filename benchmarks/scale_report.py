@@ -238,6 +238,40 @@ def tables(doc: dict) -> list[Table]:
     return [t1, t2, t3]
 
 
+def targets(doc: dict) -> list[dict]:
+    """The scale targets against a result: Ray's overhead ≤ 5 % of a task (most CPUs
+    measured), 2 workers ≥ 1.8× one (pool and Ray), and the projection's on 64 cores."""
+    s, out = doc["scaling"], []
+    if ray := s.get("ray_overhead"):
+        o = ray[max(ray, key=int)]
+        out.append(
+            {
+                "target": "Ray overhead ≤ 5 % of task time",
+                "value": pct(o["share_of_task"], ".1f"),
+                "met": o["share_of_task"] <= 0.05,
+            }
+        )
+    for eng in ("pool", "ray"):
+        if (x := s["speedup"].get(f"{eng} 2")) is not None:
+            out.append(
+                {"target": f"2 workers ≥ 1.8× one ({eng})", "value": f"{x:.2f}×", "met": x >= 1.8}
+            )
+    for name, v in doc["projection"]["variants"].items():
+        out.append(
+            {
+                "target": f"{name}: ≤ {v['target_hours_on_64']:g} h on 64 cores",
+                "value": f"{v['wall_hours_on_64']:.1f} h ({v['wall_hours_on_64_perfect']:.1f} "
+                "h at perfect scaling)",
+                "met": v["met"],
+            }
+        )
+    return out
+
+
+def _met(met: bool | None) -> str:
+    return "–" if met is None else ("yes" if met else "no")
+
+
 def _loads(xs) -> str:
     """Load averages (1, 5, 15 min) as ``a / b / c``."""
     return " / ".join(f"{x:.2f}" for x in xs)
@@ -289,6 +323,9 @@ def render_page(doc: dict, source: Path) -> str:
             f"({pct(o['share_of_task'], '.1f')} of a {o['task_s']:.2f} s task), no-op round "
             f"trip {1e3 * o['noop_roundtrip_s']:.1f} ms ({pct(o['noop_share_of_task'], '.2f')})."
         )
+    out += ["", "| target | measured | met |", "|---|---|---|"]
+    for t in targets(doc):
+        out.append(f"| {t['target']} | {t['value']} | {_met(t['met'])} |")
     out += [
         "",
         "## Projection: the real release (70 h at 120 Hz) × 7 hands",

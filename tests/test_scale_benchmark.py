@@ -112,3 +112,15 @@ def test_help():
         cwd=ROOT, capture_output=True, text=True, check=True,
     ).stdout  # fmt: skip
     assert "--workers" in out and "--ray" in out and "--quick" in out
+
+
+def test_targets_from_a_record(rows):
+    batches = [_batch("pool", 1, 4.0), _batch("pool", 2, 2.0), _batch("ray", 1, 4.0),
+               _batch("ray", 2, 2.2 + 0.2)]  # fmt: skip
+    sc = sr.scaling_summary(batches)
+    doc = {"scaling": sc, "projection": sr.project(sr.throughput(rows), sc, cores=(64,))}
+    met = {t["target"]: t["met"] for t in sr.targets(doc)}
+    assert met["Ray overhead ≤ 5 % of task time"] is False  # 0.1 s of a 1 s task
+    assert met["2 workers ≥ 1.8× one (pool)"] is True
+    assert met["2 workers ≥ 1.8× one (ray)"] is False  # 4.0 / 2.4
+    assert met["no_forces: ≤ 1 h on 64 cores"] is doc["projection"]["variants"]["no_forces"]["met"]
