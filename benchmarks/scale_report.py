@@ -240,36 +240,37 @@ def tables(doc: dict) -> list[Table]:
 
 def targets(doc: dict) -> list[dict]:
     """The scale targets against a result: Ray's overhead ≤ 5 % of a task (most CPUs
-    measured), 2 workers ≥ 1.8× one (pool and Ray), and the projection's on 64 cores."""
+    measured), 2 workers ≥ 1.8× one (pool and Ray), and the projection's on 64 cores. ``met``
+    is ``None`` where the machine decided, not the code: Ray faster than the pool (a negative
+    overhead is noise), or 2 workers that got less than :data:`CONTENDED` of their 2 cores."""
     s, out = doc["scaling"], []
     if ray := s.get("ray_overhead"):
         o = ray[max(ray, key=int)]
-        out.append(
-            {
-                "target": "Ray overhead ≤ 5 % of task time",
-                "value": pct(o["share_of_task"], ".1f"),
-                "met": o["share_of_task"] <= 0.05,
-            }
-        )
-    for eng in ("pool", "ray"):
-        if (x := s["speedup"].get(f"{eng} 2")) is not None:
-            out.append(
-                {"target": f"2 workers ≥ 1.8× one ({eng})", "value": f"{x:.2f}×", "met": x >= 1.8}
-            )
+        x, noop = o["share_of_task"], pct(o["noop_share_of_task"], ".2f")
+        out.append({"target": "Ray overhead ≤ 5 % of task time",
+                    "value": f"{pct(x, '.1f')} (no-op round trip {noop})",
+                    "met": None if x < 0 else x <= 0.05})  # fmt: skip
+    for b in doc["batches"]:
+        if b["workers"] != 2 or (x := s["speedup"].get(f"{b['engine']} 2")) is None:
+            continue
+        share = cpu_share(b)
+        out.append({"target": f"2 workers ≥ 1.8× one ({b['engine']})",
+                    "value": f"{x:.2f}× (the workers got {2 * share:.2f} of 2 cores)",
+                    "met": None if share < CONTENDED else x >= 1.8})  # fmt: skip
     for name, v in doc["projection"]["variants"].items():
-        out.append(
-            {
-                "target": f"{name}: ≤ {v['target_hours_on_64']:g} h on 64 cores",
-                "value": f"{v['wall_hours_on_64']:.1f} h ({v['wall_hours_on_64_perfect']:.1f} "
-                "h at perfect scaling)",
-                "met": v["met"],
-            }
-        )
+        out.append({"target": f"{name}: ≤ {v['target_hours_on_64']:g} h on 64 cores",
+                    "value": f"{v['wall_hours_on_64']:.1f} h ({v['wall_hours_on_64_perfect']:.1f} "
+                    "h at perfect scaling)", "met": v["met"]})  # fmt: skip
     return out
 
 
+CONTENDED = 0.9
+"""A batch whose workers got less than this share of their cores (:func:`cpu_share`) measured
+the machine's other load: its speedup decides no target."""
+
+
 def _met(met: bool | None) -> str:
-    return "–" if met is None else ("yes" if met else "no")
+    return "undecided (noise)" if met is None else ("yes" if met else "no")
 
 
 def _loads(xs) -> str:

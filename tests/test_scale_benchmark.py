@@ -118,9 +118,14 @@ def test_targets_from_a_record(rows):
     batches = [_batch("pool", 1, 4.0), _batch("pool", 2, 2.0), _batch("ray", 1, 4.0),
                _batch("ray", 2, 2.2 + 0.2)]  # fmt: skip
     sc = sr.scaling_summary(batches)
-    doc = {"scaling": sc, "projection": sr.project(sr.throughput(rows), sc, cores=(64,))}
+    for b in batches:
+        b["jobs"] = [{"wall_s": 1.0, "cpu_s": b["wall_s"] * b["workers"] / 4}] * 4  # full cores
+    doc = {"scaling": sc, "batches": batches,
+           "projection": sr.project(sr.throughput(rows), sc, cores=(64,))}  # fmt: skip
     met = {t["target"]: t["met"] for t in sr.targets(doc)}
     assert met["Ray overhead ≤ 5 % of task time"] is False  # 0.1 s of a 1 s task
     assert met["2 workers ≥ 1.8× one (pool)"] is True
     assert met["2 workers ≥ 1.8× one (ray)"] is False  # 4.0 / 2.4
     assert met["no_forces: ≤ 1 h on 64 cores"] is doc["projection"]["variants"]["no_forces"]["met"]
+    batches[1]["jobs"] = [{"wall_s": 1.0, "cpu_s": 0.5}] * 4  # 2 of 4 core-seconds: contended
+    assert {t["target"]: t["met"] for t in sr.targets(doc)}["2 workers ≥ 1.8× one (pool)"] is None
