@@ -5,7 +5,8 @@ pages in ``docs/benchmarks/`` from the newest file of each folder.
 
 Packages (one module per step: ``config``, ``jobs``, ``aggregate``, ``tables``, ``cli``, ...):
 ``force_preservation``, ``force_pipeline``, ``real_motion``. Modules: ``retarget_speed_quality``,
-``wrist_tracking``, ``ycb_models``, ``mocap_fit``, ``rl_buffer``, ``capture_conventions``.
+``wrist_tracking``, ``ycb_models``, ``mocap_fit``, ``rl_buffer``, ``capture_conventions``,
+``scale`` (its arithmetic and page in ``scale_report``).
 Shared helpers (demonstration suites, re-simulation, worker pools, table cells, result paths):
 ``_common``. How each benchmark measures: its docstring.
 """

@@ -7,8 +7,8 @@ the numbers:
 
 * ``summary.md`` — each benchmark's headline table and its targets (force pipeline, retargeting
   speed and quality, force preservation, real motion), and links to the pages below;
-* ``real_motion.md``, ``wrist_tracking.md``, ``ycb_models.md`` — the pages those benchmarks
-  write after a run, written again from their newest JSON.
+* ``real_motion.md``, ``wrist_tracking.md``, ``ycb_models.md``, ``scale.md`` — the pages those
+  benchmarks write after a run, written again from their newest JSON.
 
 Run it after a benchmark::
 
@@ -21,7 +21,7 @@ import json
 import sys
 from pathlib import Path
 
-from benchmarks import wrist_tracking, ycb_models
+from benchmarks import scale_report, wrist_tracking, ycb_models
 from benchmarks._common import PAGES, RESULTS, display_path, newest_result, pct
 from benchmarks.real_motion.config import PAGE as REAL_MOTION_PAGE
 from benchmarks.real_motion.tables import page_markdown
@@ -113,7 +113,7 @@ def main() -> int:
     newest = {
         name: newest_result(name)
         for name in ("force_pipeline", "retarget_speed_quality", "force_preservation",
-                     "real_motion", "ycb_models", "wrist_tracking")
+                     "real_motion", "ycb_models", "wrist_tracking", "scale")
     }  # fmt: skip
     lines = [
         "# Benchmarks: the current numbers",
@@ -146,6 +146,10 @@ def main() -> int:
         lines += ["## Wrist tracking", "", "See [wrist_tracking.md](wrist_tracking.md).", ""]
         doc = json.loads(path.read_text())
         written.append(write_page(wrist_tracking.PAGE, wrist_tracking.render_page(doc, path)))
+    if (path := newest["scale"]) is not None:
+        lines += ["## Scale", "", "See [scale.md](scale.md).", ""]
+        doc = json.loads(path.read_text())
+        written.append(write_page(scale_report.PAGE, scale_report.render_page(doc, path)))
     if not found:
         print(f"pages: no results in {RESULTS}; run a benchmark first", file=sys.stderr)
         return 2
