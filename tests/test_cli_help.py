@@ -8,11 +8,13 @@ import json
 import pytest
 
 from dexcanvas_core import cli as dcli
+from dexcanvas_core import cli_parser as dparser
 from dexcanvas_core import open_dataset
 from dexcanvas_core.builtin import builtin_pair_path
 from dexcanvas_core.cli_help import HelpFormatter
 from dexcanvas_core.errors import DatasetError
 from retarget import cli as rcli
+from retarget import cli_args as rargs
 
 
 def _subparsers(parser: argparse.ArgumentParser, prefix: str):
@@ -25,7 +27,7 @@ def _subparsers(parser: argparse.ArgumentParser, prefix: str):
 
 
 COMMANDS = [
-    *_subparsers(dcli.build_parser(), "dexcanvas"),
+    *_subparsers(dparser.build_parser(), "dexcanvas"),
     *_subparsers(rcli.build_parser(), "retarget"),
 ]
 
@@ -55,7 +57,7 @@ def test_every_command_has_description_examples_and_defaults(command, parser):
 
 
 def test_top_level_help_lists_the_exit_codes():
-    for parser in (dcli.build_parser(), rcli.build_parser()):
+    for parser in (dparser.build_parser(), rcli.build_parser()):
         text = parser.format_help()
         for code in ("0 ", "1 ", "2 ", "3 ", "130"):
             assert f"  {code}" in text
@@ -121,10 +123,10 @@ def test_dataset_builtin_in_the_retarget_and_simulate_configs(tmp_path):
     args = rcli.build_parser().parse_args(
         ["run", "--hand", "shadow", "--pair", "cube2/tripod", "--dataset", "builtin"]
     )
-    assert rcli._plain_run_config(args).dataset is None
+    assert rargs._plain_run_config(args).dataset is None
     args = rcli.build_parser().parse_args(["run", "--hand", "shadow", "--dataset", "./builtin"])
-    assert str(rcli._plain_run_config(args).dataset) == "builtin"  # a directory of that name
-    args = dcli.build_parser().parse_args(
+    assert str(rargs._plain_run_config(args).dataset) == "builtin"  # a directory of that name
+    args = dparser.build_parser().parse_args(
         ["simulate", "--dataset", "builtin", "--out", str(tmp_path / "s.lance")]
     )
     assert args.dataset == "builtin"

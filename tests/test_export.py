@@ -21,7 +21,8 @@ from dexcanvas_core.io import write_dataset
 from dexcanvas_core.rotations import aa_to_quat_wxyz
 from dexcanvas_core.safe_io import OutputExistsError
 from retarget.batch import BatchConfig, run_batch
-from retarget.cli import EXPORT_FORMATS, main
+from retarget.cli import main
+from retarget.cli_args import EXPORT_FORMATS
 from retarget.export import FORMATS, ExportError, export, load_export_source
 from retarget.hands import get_hand
 

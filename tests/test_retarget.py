@@ -518,7 +518,8 @@ def test_cli_run_refuses_negative_refine_retries(capsys):
 def test_cli_run_defaults_are_the_run_config_defaults():
     """The CLI states its defaults literally (``retarget.run`` loads only to run): they must
     be ``RunConfig``'s, and ``RunConfig``'s refinement retries ``RefineConfig``'s."""
-    from retarget.cli import _plain_run_config, build_parser
+    from retarget.cli import build_parser
+    from retarget.cli_args import _plain_run_config
     from retarget.pipeline import RunConfig
     from retarget.refine import RefineConfig
 

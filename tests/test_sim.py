@@ -401,7 +401,8 @@ def test_synthesize_refuses_existing_output(tmp_path, demo):
 
 def test_cli_synthesize_expands_and_resumes(tmp_path, demo, capsys):
     """Mild perturbations with the open-loop tracker keep rollouts; a crashed run resumes."""
-    from dexcanvas_core.cli import _sim_config, build_parser
+    from dexcanvas_core.cli import _sim_config
+    from dexcanvas_core.cli_parser import build_parser
     from dexcanvas_core.sim.run import _synth_row
 
     src = tmp_path / "src.lance"
