@@ -173,7 +173,7 @@ COMMANDS: dict[str, Command] = {
         examples=(
             "retarget export runs/shadow_cube2_tripod_0 --format mujoco --out exports/mj",
             "retarget export runs/shadow_cube2_tripod_0 --format robomimic --out demo.hdf5",
-            "retarget export runs/shadow_cube2_tripod_0 --format lerobot --out exports/lerobot",
+            "retarget export --dataset B.lance --row 0 --format lerobot --out exports/lerobot",
         ),
         add_arguments=_add_export_args,
         make_config=_export_config,

@@ -365,7 +365,18 @@ that ``retarget --help`` imports no MuJoCo, h5py or pyarrow)."""
 
 
 def _add_export_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="run directory (retarget run)")
+    p.add_argument(
+        "run_dir", type=Path, metavar="RUN_DIR", nargs="?", default=None,
+        help="run directory (retarget run); or give --dataset and --row",
+    )  # fmt: skip
+    p.add_argument(
+        "--dataset", type=Path, default=None, metavar="B.lance",
+        help="a robot dataset written by retarget batch, instead of RUN_DIR",
+    )  # fmt: skip
+    p.add_argument(
+        "--row", type=_non_negative_int, default=None,
+        help="with --dataset: the row to export (0-based, dataset order)",
+    )  # fmt: skip
     p.add_argument(
         "--format",
         required=True,
@@ -387,5 +398,6 @@ def _export_config(args: argparse.Namespace):
     from retarget.export import ExportConfig
 
     return ExportConfig(
-        run_dir=args.run_dir, format=args.format, out=args.out, overwrite=args.overwrite
-    ).validate()
+        run_dir=args.run_dir, format=args.format, out=args.out, overwrite=args.overwrite,
+        dataset=args.dataset, row=args.row,
+    ).validate()  # fmt: skip

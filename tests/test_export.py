@@ -95,6 +95,17 @@ def test_robot_dataset_row_is_the_same_source_as_the_run(batch_source, source, b
         load_export_source(dataset=batch_dataset, row=5)
 
 
+def test_cli_exports_a_robot_dataset_row(batch_dataset, tmp_path, capsys):
+    """``retarget export --dataset B.lance --row 0``; a row that is not there is exit 2."""
+    out = tmp_path / "row0.hdf5"
+    argv = ["export", "--dataset", str(batch_dataset), "--format", "robomimic"]
+    assert main([*argv, "--row", "0", "--out", str(out)]) == EXIT_OK
+    with h5py.File(out, "r") as f:
+        assert f["data/demo_0/actions"].shape[0] == FRAMES
+    assert main([*argv, "--row", "3", "--out", str(tmp_path / "x.hdf5")]) == 2
+    assert "--row 3 is not one of them" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("fmt", FORMATS)
 def test_robot_dataset_row_exports_to_every_format(fmt, batch_source, tmp_path):
     out = export(batch_source, fmt, tmp_path / f"row.{'hdf5' if fmt == 'robomimic' else 'd'}")
