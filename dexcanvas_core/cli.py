@@ -312,15 +312,24 @@ def run_simulate_command(args: argparse.Namespace) -> dict:
     """``dexcanvas simulate``: track one demonstration in physics, write contacts and forces."""
     from dexcanvas_core.sim.run import SimulateConfig, run_simulate  # lazy: mujoco ~0.5 s on --help
 
+    all_rows = args.all_rows
+    if all_rows and args.dataset == BUILTIN:
+        dataset = read_dataset_path(BUILTIN)  # --all of the built-in set: the whole set
+    else:
+        dataset = None if args.dataset == BUILTIN else args.dataset
     return run_simulate(
         SimulateConfig(
             pair=args.pair,
             out=args.out,
-            dataset=None if args.dataset == BUILTIN else args.dataset,
+            dataset=dataset,
             index=args.index,
             sim=_sim_config(args),
             overwrite=args.overwrite,
             plot=not args.no_plot,
+            all_rows=all_rows,
+            limit=args.limit,
+            workers=args.workers,
+            ray_address=args.ray_address,
         )
     )
 

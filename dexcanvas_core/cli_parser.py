@@ -164,6 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
         "when the hand loses the object.",
         "dexcanvas simulate --pair cube2/tripod --out sim.lance",
         "dexcanvas simulate --dataset real.lance --index 2 --out sim.lance --samples 32",
+        "dexcanvas simulate --dataset real.lance --all --workers 2 --out sim.lance",
     )  # fmt: skip
     s.add_argument("--pair", default=None,
                    help="OBJECT/TYPE, e.g. cube2/tripod (optional with --dataset)")  # fmt: skip
@@ -175,6 +176,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--object", default=None, help="simulate another catalogue object (cube2h for a cube2 demo)"
     )
     s.add_argument("--no-plot", action="store_true", help="skip the per-finger force PNG")
+    s.add_argument("--all", action="store_true", dest="all_rows",
+                   help="track every row of --dataset (resumable; the rows that keep their "
+                   "object are written, every row's metrics to OUT.report.json)")  # fmt: skip
+    s.add_argument("--limit", type=int, default=None,
+                   help="with --all: only the first N rows (default: all)")  # fmt: skip
+    s.add_argument("--workers", type=int, default=1, help="with --all: local processes")
+    s.add_argument("--ray-address", default=None, metavar="auto|HOST:PORT|local",
+                   help="with --all: run the rows as Ray tasks on that cluster; local: a "
+                   "private local Ray (default: the local processes)")  # fmt: skip
     add_allow_implausible(s)
     add_object_options(s)
     _add_tracker_args(s)

@@ -46,13 +46,66 @@ class SimulateConfig:
     overwrite: bool = False
     progress: bool = True
     plot: bool = True
+    all_rows: bool = False
+    """Track every row of ``dataset`` (the first ``limit``) instead of one; rows run as jobs
+    on ``workers`` local processes or Ray (``ray_address``), checkpointed per row so an
+    interrupted run resumes (:func:`run_simulate_all`)."""
+    limit: int | None = None
+    workers: int = 1
+    ray_address: str | None = None
 
 
 def run_simulate(cfg: SimulateConfig) -> dict:
-    """Track one demonstration, write the dataset, metrics and plot; return the metrics."""
+    """Track one demonstration (or, with ``all_rows``, every row of the dataset), write the
+    dataset, metrics and plot; return the metrics (``success``: every row kept its object)."""
+    if cfg.all_rows:
+        return run_simulate_all(cfg)
     out = check_output(cfg.out, overwrite=cfg.overwrite, kind="dir")
     with output_lock(out):
         return _simulate(cfg, out)
+
+
+def _simulate_row(args) -> tuple[str, int, list[dict]]:
+    """Worker: the force pipeline on one source row, checkpointed as ``work/<uuid>.lance``
+    (when the rollout kept the object) and ``work/<uuid>.json`` (its metrics)."""
+    dataset, position, sim_cfg, work = args
+    traj = open_dataset(dataset).take([position])[0]
+    res = simulate(traj, sim_cfg)
+    metrics = {**res.metrics, "uuid": traj.uuid, "row": position, "pair": str(subject_of(traj))}
+    if res.success:
+        write_dataset([res.trajectory], Path(work) / f"{traj.uuid}.lance", mode="overwrite")
+    atomic_write_text(
+        Path(work) / f"{traj.uuid}.json", json.dumps([metrics], sort_keys=True, default=float)
+    )
+    return traj.uuid, int(res.success), [metrics]
+
+
+def run_simulate_all(cfg: SimulateConfig) -> dict:
+    """``dexcanvas simulate --dataset D --all``: the force pipeline on every row of ``D`` (the
+    first ``limit``) as jobs on the pool or Ray; the rollouts that kept their object form the
+    output dataset, every row's metrics go to ``OUT.report.json``; resumable like
+    ``synthesize``. Returns a summary with ``success`` (every row kept its object)."""
+    if cfg.dataset is None:
+        raise DatasetError("--all tracks every row of a dataset: give --dataset PATH")
+    if cfg.limit is not None and cfg.limit < 1:
+        raise DatasetError(f"--limit must be at least 1, got {cfg.limit}; leave it out for all")
+    out = check_output(cfg.out, overwrite=cfg.overwrite, kind="dir")
+    with output_lock(out):
+        cfg.sim.validate()
+        uuids, positions = _source_rows(cfg.dataset, cfg.limit)
+        settings = {"dataset": str(cfg.dataset), "sim": cfg.sim.as_dict(), "all": True}
+        work = _work_dir(out, settings)
+        jobs = [(str(cfg.dataset), p, cfg.sim, str(work)) for p in positions
+                if not (work / f"{uuids[p]}.json").exists()]  # fmt: skip
+        _run_row_jobs(_simulate_row, jobs, len(positions), "tracking rows", cfg)
+        summary = _assemble(out, work, uuids, positions, cfg.overwrite, what=" rows tracked")
+    summary["success"] = summary["kept"] == summary["rollouts"]
+    if cfg.progress:
+        print(
+            f"{summary['kept']} of {summary['rollouts']} rows kept their object; wrote {out} "
+            f"and {out.name}.report.json"
+        )
+    return summary
 
 
 def _simulate(cfg: SimulateConfig, out: Path) -> dict:
@@ -221,21 +274,23 @@ def run_synthesize(cfg: SynthesizeConfig) -> dict:
         return _synthesize(cfg, out)
 
 
-def _synthesize(cfg: SynthesizeConfig, out: Path) -> dict:
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
-
-    cfg.sim.validate()
-    src = open_dataset(cfg.dataset)
-    meta = src.scan_metadata()
-    index = meta.column("index").combine_chunks()
+def _source_rows(dataset, limit: int | None) -> tuple[list[str], list[int]]:
+    """The source dataset's row uuids and the positions to process (the first ``limit``),
+    after checking that every object they name is known."""
+    src = open_dataset(dataset)
+    index = src.scan_metadata().column("index").combine_chunks()
     uuids = [str(u) for u in index.field("uuid").to_pylist()]
-    positions = list(range(len(uuids)))[: cfg.limit]
+    positions = list(range(len(uuids)))[:limit]
     scenes = index.field("scene").to_pylist()
-    check_objects_known({scenes[p] for p in positions if scenes[p]}, str(cfg.dataset))
+    check_objects_known({scenes[p] for p in positions if scenes[p]}, str(dataset))
+    return uuids, positions
+
+
+def _work_dir(out: Path, settings: dict) -> Path:
+    """``<out>.work/``, the per-row checkpoints of an interrupted run with these
+    ``settings`` (another run's is refused)."""
     work = out.with_name(out.name + ".work")
     work.mkdir(parents=True, exist_ok=True)
-    settings = {"dataset": str(cfg.dataset), "expand": cfg.expand, "seed": cfg.seed,
-                "sim": cfg.sim.as_dict(), "ranges": dataclasses.asdict(cfg.ranges)}  # fmt: skip
     stamp = work / "settings.json"
     if stamp.exists() and json.loads(stamp.read_text()) != json.loads(json.dumps(settings)):
         raise DatasetError(
@@ -244,35 +299,39 @@ def _synthesize(cfg: SynthesizeConfig, out: Path) -> dict:
             dataset=str(work),
         )
     atomic_write_text(stamp, json.dumps(settings, sort_keys=True))
-    todo = [p for p in positions if not (work / f"{uuids[p]}.json").exists()]
-    jobs = [
-        (str(cfg.dataset), p, cfg.expand, cfg.seed, cfg.sim, cfg.ranges, str(work)) for p in todo
-    ]
+    return work
+
+
+def _run_row_jobs(worker, jobs: list, total: int, label: str, cfg) -> None:
+    """Run the per-row ``jobs`` (those not checkpointed yet, of ``total``) on Ray
+    (``cfg.ray_address``), ``cfg.workers`` local processes, or in this process."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
     with Progress(
         "[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
         TimeElapsedColumn(), disable=not cfg.progress,
     ) as bar:  # fmt: skip
-        task = bar.add_task(
-            f"synthesizing ×{cfg.expand}",
-            total=len(positions),
-            completed=len(positions) - len(todo),
-        )
+        task = bar.add_task(label, total=total, completed=total - len(jobs))
         if cfg.ray_address is not None:
             for _, _, error in map_unordered(
-                _synth_row, jobs, workers=cfg.workers, ray_address=cfg.ray_address
+                worker, jobs, workers=cfg.workers, ray_address=cfg.ray_address
             ):
                 if error is not None:
                     raise error
                 bar.advance(task)
         elif cfg.workers > 1 and len(jobs) > 1:
             with ProcessPoolExecutor(cfg.workers) as pool:
-                for _ in pool.map(_synth_row, jobs):
+                for _ in pool.map(worker, jobs):
                     bar.advance(task)
         else:
             for job in jobs:
-                _synth_row(job)
+                worker(job)
                 bar.advance(task)
-    # assemble
+
+
+def _assemble(out: Path, work: Path, uuids, positions, overwrite: bool, what: str) -> dict:
+    """Write the kept trajectories of every row's checkpoint as ``out`` and every report as
+    ``out.report.json``; remove the checkpoints; return the summary."""
     kept, reports = [], []
     for p in positions:
         reports += json.loads((work / f"{uuids[p]}.json").read_text())
@@ -281,10 +340,11 @@ def _synthesize(cfg: SynthesizeConfig, out: Path) -> dict:
             kept += list(open_dataset(part).iter_trajectories())
     if not kept:
         raise DatasetError(
-            f"no rollout succeeded out of {len(reports)}; nothing to write (reports in {work})",
+            f"no rollout succeeded out of {len(reports)}{what}; nothing to write (reports in "
+            f"{work})",
             dataset=str(out),
         )
-    write_dataset(kept, out, mode="overwrite" if cfg.overwrite else "create")
+    write_dataset(kept, out, mode="overwrite" if overwrite else "create")
     summary = {
         "source_rows": len(positions),
         "rollouts": len(reports),
@@ -297,9 +357,24 @@ def _synthesize(cfg: SynthesizeConfig, out: Path) -> dict:
         json.dumps({"summary": summary, "rollouts": reports}, indent=1, default=float),
     )
     shutil.rmtree(work, ignore_errors=True)
+    return summary
+
+
+def _synthesize(cfg: SynthesizeConfig, out: Path) -> dict:
+    cfg.sim.validate()
+    uuids, positions = _source_rows(cfg.dataset, cfg.limit)
+    settings = {"dataset": str(cfg.dataset), "expand": cfg.expand, "seed": cfg.seed,
+                "sim": cfg.sim.as_dict(), "ranges": dataclasses.asdict(cfg.ranges)}  # fmt: skip
+    work = _work_dir(out, settings)
+    todo = [p for p in positions if not (work / f"{uuids[p]}.json").exists()]
+    jobs = [
+        (str(cfg.dataset), p, cfg.expand, cfg.seed, cfg.sim, cfg.ranges, str(work)) for p in todo
+    ]
+    _run_row_jobs(_synth_row, jobs, len(positions), f"synthesizing ×{cfg.expand}", cfg)
+    summary = _assemble(out, work, uuids, positions, cfg.overwrite, what="")
     if cfg.progress:
         print(
-            f"kept {len(kept)} of {len(reports)} rollouts "
+            f"kept {summary['kept']} of {summary['rollouts']} rollouts "
             f"({100 * summary['success_rate']:.0f} %) from {len(positions)} source rows → {out}"
         )
     return summary
