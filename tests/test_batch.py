@@ -132,7 +132,8 @@ def _version(path: Path) -> int:
 
 @pytest.mark.filterwarnings("ignore:lance is not fork-safe")  # Ray forks, then execs
 def test_local_ray_equals_pool(pool_run, tmp_path):
-    ray = pytest.importorskip("ray")
+    import ray
+
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
         out = tmp_path / "R.lance"

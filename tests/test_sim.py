@@ -478,7 +478,6 @@ def test_reference_lowpass_removes_fit_noise_and_keeps_scripted_motion(demo):
 @pytest.mark.filterwarnings("ignore:lance is not fork-safe")  # Ray forks, then execs
 def test_synthesize_on_local_ray_equals_in_process(tmp_path, demo):
     """``dexcanvas synthesize --ray-address local``: the same rollouts as without Ray."""
-    pytest.importorskip("ray")
     src = tmp_path / "src.lance"
     write_dataset([demo.slice(150, 300)], src)
     base = ["synthesize", "--dataset", str(src), "--expand", "1", "--tracker", "open_loop",
