@@ -15,7 +15,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import shutil
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -304,7 +303,7 @@ def _work_dir(out: Path, settings: dict) -> Path:
 
 def _run_row_jobs(worker, jobs: list, total: int, label: str, cfg) -> None:
     """Run the per-row ``jobs`` (those not checkpointed yet, of ``total``) on Ray
-    (``cfg.ray_address``), ``cfg.workers`` local processes, or in this process."""
+    (``cfg.ray_address``), ``cfg.workers`` spawned local processes, or in this process."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
     with Progress(
@@ -312,17 +311,15 @@ def _run_row_jobs(worker, jobs: list, total: int, label: str, cfg) -> None:
         TimeElapsedColumn(), disable=not cfg.progress,
     ) as bar:  # fmt: skip
         task = bar.add_task(label, total=total, completed=total - len(jobs))
-        if cfg.ray_address is not None:
+        if cfg.ray_address is not None or (cfg.workers > 1 and len(jobs) > 1):
+            # spawned processes or Ray tasks: a forked copy of this process's Lance state can
+            # deadlock (objects given with --objects reach them through $DEXCANVAS_OBJECTS)
             for _, _, error in map_unordered(
                 worker, jobs, workers=cfg.workers, ray_address=cfg.ray_address
             ):
                 if error is not None:
                     raise error
                 bar.advance(task)
-        elif cfg.workers > 1 and len(jobs) > 1:
-            with ProcessPoolExecutor(cfg.workers) as pool:
-                for _ in pool.map(worker, jobs):
-                    bar.advance(task)
         else:
             for job in jobs:
                 worker(job)
