@@ -116,26 +116,7 @@ def source_from_run(run: RunFiles) -> ExportSource:
     fps = float(m["fps"])
     if not (np.isfinite(fps) and fps > 0):
         raise ExportError(f"{run.run_dir / 'metrics.json'}: fps must be > 0, got {m['fps']!r}")
-    obj = m.get("object") or {}
-    table = Table.from_dict(m["table"]) if isinstance(m.get("table"), dict) else DEFAULT_TABLE
-    return ExportSource(
-        hand=str(m["hand"]),
-        joint_names=[str(n) for n in a["joint_names"]],
-        q=np.asarray(a["q"], dtype=np.float64),
-        q_command=np.asarray(a["q_command"], dtype=np.float64),
-        q_sim=np.asarray(a["q_sim"], dtype=np.float64),
-        timestamp=run.timestamp - run.timestamp[0],
-        fps=fps,
-        object_id=str(obj.get("id") or str(m["pair"]).split("/", 1)[0]),
-        object_pos=np.asarray(a["object_pos_sim"], dtype=np.float64),
-        object_rot_aa=np.asarray(a["object_rot_sim"], dtype=np.float64),
-        tip_sites=[str(s) for s in a["tip_sites"]],
-        tip_pos=np.asarray(a["tip_pos_world"], dtype=np.float64),
-        force_parts=[str(p) for p in a["force_parts"]],
-        finger_force=np.asarray(a["finger_force_world"], dtype=np.float64),
-        table=table,
-        metrics=m,
-    )
+    return _source(str(m["hand"]), a, run.timestamp, fps, m)
 
 
 def source_from_robot_row(dataset: str | Path, row: int) -> ExportSource:
@@ -153,31 +134,37 @@ def source_from_robot_row(dataset: str | Path, row: int) -> ExportSource:
         raise ExportError(str(e)) from e
     if row >= len(rows):
         raise ExportError(f"{dataset} has {len(rows)} rows; --row {row} is not one of them")
-    r = rows[row]  # arrays are copied below: Arrow's buffers are read-only
+    r = rows[row]
     if r["status"] != "ok":
         raise ExportError(
             f"{dataset} row {row} ({r['pair']}, {r['hand']}) failed in the batch: {r['reason']}; "
             "it has no trajectory to export (rerun it with retarget batch --retry-failed)"
         )
-    m = dict(r["metrics"])
+    arrays = {k: np.array(v, dtype=np.float64) if isinstance(v, np.ndarray) else v
+              for k, v in r.items()}  # fmt: skip  # copies: Arrow's buffers are read-only
+    return _source(str(r["hand"]), arrays, arrays["timestamp"], float(r["fps"]), dict(r["metrics"]))
+
+
+def _source(hand: str, a, timestamp: np.ndarray, fps: float, m: dict) -> ExportSource:
+    """The :class:`ExportSource` of arrays ``a`` (the keys of ``robot_trajectory.npz``, which
+    a robot-dataset row shares) and metrics ``m``."""
     obj = m.get("object") or {}
     table = Table.from_dict(m["table"]) if isinstance(m.get("table"), dict) else DEFAULT_TABLE
-    ts = np.array(r["timestamp"], dtype=np.float64)
     return ExportSource(
-        hand=str(r["hand"]),
-        joint_names=[str(n) for n in r["joint_names"]],
-        q=np.array(r["q"], dtype=np.float64),
-        q_command=np.array(r["q_command"], dtype=np.float64),
-        q_sim=np.array(r["q_sim"], dtype=np.float64),
-        timestamp=ts - ts[0],
-        fps=float(r["fps"]),
-        object_id=str(obj.get("id") or str(r["pair"]).split("/", 1)[0]),
-        object_pos=np.array(r["object_pos_sim"], dtype=np.float64),
-        object_rot_aa=np.array(r["object_rot_sim"], dtype=np.float64),
-        tip_sites=[str(s) for s in r["tip_sites"]],
-        tip_pos=np.array(r["tip_pos_world"], dtype=np.float64),
-        force_parts=[str(p) for p in r["force_parts"]],
-        finger_force=np.array(r["finger_force_world"], dtype=np.float64),
+        hand=hand,
+        joint_names=[str(n) for n in a["joint_names"]],
+        q=np.asarray(a["q"], dtype=np.float64),
+        q_command=np.asarray(a["q_command"], dtype=np.float64),
+        q_sim=np.asarray(a["q_sim"], dtype=np.float64),
+        timestamp=np.asarray(timestamp, dtype=np.float64) - timestamp[0],
+        fps=fps,
+        object_id=str(obj.get("id") or str(m["pair"]).split("/", 1)[0]),
+        object_pos=np.asarray(a["object_pos_sim"], dtype=np.float64),
+        object_rot_aa=np.asarray(a["object_rot_sim"], dtype=np.float64),
+        tip_sites=[str(x) for x in a["tip_sites"]],
+        tip_pos=np.asarray(a["tip_pos_world"], dtype=np.float64),
+        force_parts=[str(x) for x in a["force_parts"]],
+        finger_force=np.asarray(a["finger_force_world"], dtype=np.float64),
         table=table,
         metrics=m,
     )
